@@ -1,0 +1,1 @@
+// yocto_bvh: implementation (in progress)

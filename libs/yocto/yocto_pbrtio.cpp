@@ -1,0 +1,1 @@
+// yocto_pbrtio: implementation (in progress)

@@ -1,0 +1,1 @@
+// yocto_scene: implementation (in progress)

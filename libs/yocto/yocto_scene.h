@@ -1,0 +1,181 @@
+//
+// # Yocto/Scene: the scene model
+//
+// Only what hair scenes need: perspective cameras, one environment (constant or
+// image), shapes made of triangles, line segments or cubic Bezier curves with a
+// per-vertex radius, materials `matte`, `glossy` and `hair`, and instances that
+// place a shape with a material. Elements refer to each other by index (-1 is
+// none). Names live in parallel `*_names` arrays, as in Yocto/GL.
+//
+
+#ifndef YOCTO_SCENE_H_
+#define YOCTO_SCENE_H_
+
+#include <yocto_hair/yocto_hair.h>
+
+#include <array>
+#include <string>
+#include <vector>
+
+#include "yocto_math.h"
+
+// -----------------------------------------------------------------------------
+// SCENE DATA
+// -----------------------------------------------------------------------------
+namespace yocto {
+
+// Perspective camera looking along -z of its frame. Lens, film and focus in
+// meters as Yocto/GL; aspect is width over height.
+struct camera_data {
+  frame3f frame        = identity3x4f;
+  bool    orthographic = false;
+  float   lens         = 0.050f;
+  float   film         = 0.036f;
+  float   aspect       = 1.5f;
+  float   focus        = 10000;
+  float   aperture     = 0;
+};
+
+// Linear RGB float image (row 0 is the top row).
+struct texture_data {
+  int                width  = 0;
+  int                height = 0;
+  std::vector<vec3f> pixels = {};
+};
+
+enum struct material_type { matte, glossy, hair };
+inline const auto material_type_names = std::array<std::string, 3>{
+    "matte", "glossy", "hair"};
+
+// Material: matte is Lambertian; glossy is a GGX dielectric coat (roughness,
+// ior) over a Lambertian base; hair holds the hair model's parameters.
+struct material_data {
+  material_type type      = material_type::matte;
+  vec3f         emission  = {0, 0, 0};
+  vec3f         color     = {0, 0, 0};
+  float         roughness = 0;
+  float         ior       = 1.5f;
+  int           emission_tex = -1;
+  int           color_tex    = -1;
+  hair_material hair         = {};
+};
+
+// A shape is one of: triangles, lines (segments between two vertices) or
+// curves (cubic Bezier segments with four control points). Radius is
+// per vertex (per control point for curves).
+struct shape_data {
+  std::vector<vec3i> triangles = {};
+  std::vector<vec2i> lines     = {};
+  std::vector<vec4i> curves    = {};
+  std::vector<vec3f> positions = {};
+  std::vector<vec3f> normals   = {};
+  std::vector<vec2f> texcoords = {};
+  std::vector<float> radius    = {};
+};
+
+struct instance_data {
+  frame3f frame    = identity3x4f;
+  int     shape    = -1;
+  int     material = -1;
+};
+
+// Environment: emission times an optional equirectangular texture, oriented by
+// its frame.
+struct environment_data {
+  frame3f frame        = identity3x4f;
+  vec3f   emission     = {0, 0, 0};
+  int     emission_tex = -1;
+};
+
+// Directional light (pbrt's "distant"): radiance arriving from `direction`
+// (pointing towards the light) with the given irradiance.
+struct distant_light_data {
+  vec3f direction = {0, 0, 1};
+  vec3f emission  = {0, 0, 0};
+};
+
+// Render settings a scene file may carry (pbrt's Film, Sampler, Integrator).
+struct scene_render_settings {
+  int resolution = 0;  // largest image side, 0 if not given
+  int samples    = 0;  // 0 if not given
+  int bounces    = 0;  // 0 if not given
+};
+
+struct scene_data {
+  std::vector<camera_data>        cameras        = {};
+  std::vector<environment_data>   environments   = {};
+  std::vector<distant_light_data> distant_lights = {};
+  std::vector<shape_data>         shapes         = {};
+  std::vector<texture_data>       textures       = {};
+  std::vector<material_data>      materials      = {};
+  std::vector<instance_data>      instances      = {};
+
+  std::vector<std::string> camera_names      = {};
+  std::vector<std::string> environment_names = {};
+  std::vector<std::string> shape_names       = {};
+  std::vector<std::string> texture_names     = {};
+  std::vector<std::string> material_names    = {};
+  std::vector<std::string> instance_names    = {};
+
+  scene_render_settings settings  = {};
+  std::string           copyright = "";
+};
+
+}  // namespace yocto
+
+// -----------------------------------------------------------------------------
+// SCENE EVALUATION
+// -----------------------------------------------------------------------------
+namespace yocto {
+
+// Camera ray through image coordinates uv in [0,1]^2 (v down) with lens
+// sample luv for depth of field.
+ray3f eval_camera(const camera_data& camera, const vec2f& image_uv, const vec2f& lens_uv);
+
+// Image resolution for a camera whose largest side is `resolution` pixels.
+vec2i camera_resolution(const camera_data& camera, int resolution);
+
+// Texture lookup with bilinear filtering and wrapping; uv in [0,1]^2.
+vec3f eval_texture(const texture_data& texture, const vec2f& uv);
+
+// Environment radiance arriving from direction (pointing away from the scene).
+vec3f eval_environment(const scene_data& scene, const environment_data& environment,
+    const vec3f& direction);
+// Equirectangular coordinates of a local direction and back.
+vec2f direction_to_equirect(const vec3f& local_direction);
+vec3f equirect_to_direction(const vec2f& uv);
+
+// Bounds of a shape and of the whole scene.
+bbox3f compute_bounds(const shape_data& shape);
+bbox3f compute_bounds(const scene_data& scene);
+
+// Is this a fiber shape (lines or curves)?
+inline bool is_fiber(const shape_data& shape) {
+  return !shape.lines.empty() || !shape.curves.empty();
+}
+
+// Cubic Bezier evaluation and derivative at u in [0, 1].
+inline vec3f eval_bezier(
+    const vec3f& p0, const vec3f& p1, const vec3f& p2, const vec3f& p3, float u) {
+  auto v = 1 - u;
+  return v * v * v * p0 + 3 * v * v * u * p1 + 3 * v * u * u * p2 + u * u * u * p3;
+}
+inline float eval_bezier(float p0, float p1, float p2, float p3, float u) {
+  auto v = 1 - u;
+  return v * v * v * p0 + 3 * v * v * u * p1 + 3 * v * u * u * p2 + u * u * u * p3;
+}
+inline vec3f eval_bezier_derivative(
+    const vec3f& p0, const vec3f& p1, const vec3f& p2, const vec3f& p3, float u) {
+  auto v = 1 - u;
+  return 3 * v * v * (p1 - p0) + 6 * v * u * (p2 - p1) + 3 * u * u * (p3 - p2);
+}
+
+// Checks references and sizes; returns false with a message naming the element.
+bool validate_scene(const scene_data& scene, std::string& error);
+
+// Adds a default camera framing the scene bounds if the scene has none.
+void add_missing_camera(scene_data& scene);
+
+}  // namespace yocto
+
+#endif

@@ -1,0 +1,1 @@
+// yocto_sceneio: implementation (in progress)

@@ -1,0 +1,1 @@
+// yocto_trace: implementation (in progress)

@@ -1,0 +1,1 @@
+// yocto_hair: implementation (in progress)
