@@ -1,1 +1,241 @@
-// yocto_scene: implementation (in progress)
+//
+// Implementation of Yocto/Scene.
+//
+
+#include "yocto_scene.h"
+
+#include <cmath>
+
+// -----------------------------------------------------------------------------
+// CAMERAS
+// -----------------------------------------------------------------------------
+namespace yocto {
+
+vec2i camera_resolution(const camera_data& camera, int resolution) {
+  auto aspect = camera.aspect > 0 ? camera.aspect : 1.0f;
+  if (aspect >= 1) {
+    return {resolution, std::max(1, (int)std::lround(resolution / aspect))};
+  } else {
+    return {std::max(1, (int)std::lround(resolution * aspect)), resolution};
+  }
+}
+
+ray3f eval_camera(const camera_data& camera, const vec2f& image_uv, const vec2f& lens_uv) {
+  // The film spans `film` on its larger side; the image plane is at `lens`
+  // behind the pinhole, so a film point q maps to the direction -q.
+  auto film = camera.aspect >= 1
+                  ? vec2f{camera.film, camera.film / camera.aspect}
+                  : vec2f{camera.film * camera.aspect, camera.film};
+  auto q = vec3f{film.x * (0.5f - image_uv.x), film.y * (image_uv.y - 0.5f),
+      camera.lens};
+  if (camera.orthographic) {
+    auto scale = camera.focus / camera.lens;
+    auto o     = vec3f{-q.x * scale, -q.y * scale, 0};
+    return {transform_point(camera.frame, o),
+        transform_direction(camera.frame, {0, 0, -1})};
+  }
+  auto direction = normalize(-q);
+  if (camera.aperture <= 0) {
+    return {camera.frame.o, transform_direction(camera.frame, direction)};
+  }
+  // Thin lens: aim every lens point at the point in focus along this pixel.
+  auto focus_point = direction * (camera.focus / std::abs(direction.z));
+  auto r           = std::sqrt(lens_uv.x) * camera.aperture / 2;
+  auto phi         = 2 * pif * lens_uv.y;
+  auto lens_point  = vec3f{r * std::cos(phi), r * std::sin(phi), 0};
+  return {transform_point(camera.frame, lens_point),
+      transform_direction(camera.frame, focus_point - lens_point)};
+}
+
+}  // namespace yocto
+
+// -----------------------------------------------------------------------------
+// TEXTURES AND ENVIRONMENTS
+// -----------------------------------------------------------------------------
+namespace yocto {
+
+vec3f eval_texture(const texture_data& texture, const vec2f& uv) {
+  if (texture.width <= 0 || texture.height <= 0) return {1, 1, 1};
+  // Bilinear lookup with wrapping; pixel centers at half-integers.
+  auto s  = (uv.x - std::floor(uv.x)) * texture.width - 0.5f;
+  auto t  = (uv.y - std::floor(uv.y)) * texture.height - 0.5f;
+  auto i  = (int)std::floor(s), j = (int)std::floor(t);
+  auto fu = s - i, fv = t - j;
+  auto wrap_i = [&](int x) { return ((x % texture.width) + texture.width) % texture.width; };
+  auto wrap_j = [&](int y) { return ((y % texture.height) + texture.height) % texture.height; };
+  auto at = [&](int x, int y) {
+    return texture.pixels[(size_t)wrap_j(y) * texture.width + wrap_i(x)];
+  };
+  return at(i, j) * (1 - fu) * (1 - fv) + at(i + 1, j) * fu * (1 - fv) +
+         at(i, j + 1) * (1 - fu) * fv + at(i + 1, j + 1) * fu * fv;
+}
+
+// Yocto/GL's equirectangular convention: u = atan2(z, x) / 2pi, v = acos(y)/pi.
+vec2f direction_to_equirect(const vec3f& w) {
+  auto u = std::atan2(w.z, w.x) / (2 * pif);
+  if (u < 0) u += 1;
+  return {u, safe_acos(w.y) / pif};
+}
+vec3f equirect_to_direction(const vec2f& uv) {
+  auto phi = uv.x * 2 * pif, theta = uv.y * pif;
+  return {std::cos(phi) * std::sin(theta), std::cos(theta), std::sin(phi) * std::sin(theta)};
+}
+
+vec3f eval_environment(const scene_data& scene, const environment_data& environment,
+    const vec3f& direction) {
+  if (environment.emission_tex < 0) return environment.emission;
+  auto local = transform_direction(inverse(environment.frame, false), direction);
+  return environment.emission *
+         eval_texture(scene.textures[environment.emission_tex], direction_to_equirect(local));
+}
+
+}  // namespace yocto
+
+// -----------------------------------------------------------------------------
+// BOUNDS AND VALIDATION
+// -----------------------------------------------------------------------------
+namespace yocto {
+
+bbox3f compute_bounds(const shape_data& shape) {
+  auto bounds = bbox3f{};
+  for (auto i = 0; i < (int)shape.positions.size(); i++) {
+    auto r = i < (int)shape.radius.size() ? shape.radius[i] : 0.0f;
+    bounds = merge(bounds, shape.positions[i] - r);
+    bounds = merge(bounds, shape.positions[i] + r);
+  }
+  return bounds;
+}
+
+bbox3f compute_bounds(const scene_data& scene) {
+  auto shape_bounds = std::vector<bbox3f>{};
+  for (auto& shape : scene.shapes) shape_bounds.push_back(compute_bounds(shape));
+  auto bounds = bbox3f{};
+  for (auto& instance : scene.instances) {
+    if (instance.shape < 0 || instance.shape >= (int)shape_bounds.size()) continue;
+    auto& sb = shape_bounds[instance.shape];
+    if (empty(sb)) continue;
+    for (auto c = 0; c < 8; c++) {
+      auto corner = vec3f{(c & 1) ? sb.max.x : sb.min.x,
+          (c & 2) ? sb.max.y : sb.min.y, (c & 4) ? sb.max.z : sb.min.z};
+      bounds = merge(bounds, transform_point(instance.frame, corner));
+    }
+  }
+  return bounds;
+}
+
+template <typename T>
+static bool check_elements(const std::vector<T>& elements, int num_vertices,
+    const std::string& shape_name, const char* kind, std::string& error) {
+  for (auto i = 0; i < (int)elements.size(); i++) {
+    for (auto k = 0; k < (int)elements[i].length(); k++) {
+      if (elements[i][k] < 0 || elements[i][k] >= num_vertices) {
+        error = "shape " + shape_name + ": " + kind + " " + std::to_string(i) +
+                " references vertex " + std::to_string(elements[i][k]) + " of " +
+                std::to_string(num_vertices);
+        return false;
+      }
+    }
+  }
+  return true;
+}
+
+static std::string element_name(const std::vector<std::string>& names, int index,
+    const char* kind) {
+  if (index >= 0 && index < (int)names.size() && !names[index].empty())
+    return std::string(kind) + " \"" + names[index] + "\"";
+  return std::string(kind) + " " + std::to_string(index);
+}
+
+bool validate_scene(const scene_data& scene, std::string& error) {
+  auto num_textures = (int)scene.textures.size();
+  for (auto i = 0; i < (int)scene.shapes.size(); i++) {
+    auto& shape = scene.shapes[i];
+    auto  name  = element_name(scene.shape_names, i, "shape");
+    auto  kinds = (int)!shape.triangles.empty() + (int)!shape.lines.empty() +
+                 (int)!shape.curves.empty();
+    if (kinds > 1) {
+      error = name + ": a shape holds only one of triangles, lines or curves";
+      return false;
+    }
+    auto nverts = (int)shape.positions.size();
+    auto check_size = [&](size_t size, const char* what) {
+      if (size != 0 && size != (size_t)nverts) {
+        error = name + ": " + what + " has " + std::to_string(size) +
+                " values for " + std::to_string(nverts) + " vertices";
+        return false;
+      }
+      return true;
+    };
+    if (!check_size(shape.normals.size(), "normals")) return false;
+    if (!check_size(shape.texcoords.size(), "texcoords")) return false;
+    if (!check_size(shape.radius.size(), "radius")) return false;
+    if (!check_elements(shape.triangles, nverts, name, "triangle", error)) return false;
+    if (!check_elements(shape.lines, nverts, name, "line", error)) return false;
+    if (!check_elements(shape.curves, nverts, name, "curve", error)) return false;
+  }
+  for (auto i = 0; i < (int)scene.materials.size(); i++) {
+    auto& material = scene.materials[i];
+    for (auto tex : {material.emission_tex, material.color_tex}) {
+      if (tex < -1 || tex >= num_textures) {
+        error = element_name(scene.material_names, i, "material") +
+                ": texture reference " + std::to_string(tex) + " out of range";
+        return false;
+      }
+    }
+  }
+  for (auto i = 0; i < (int)scene.environments.size(); i++) {
+    auto tex = scene.environments[i].emission_tex;
+    if (tex < -1 || tex >= num_textures) {
+      error = element_name(scene.environment_names, i, "environment") +
+              ": texture reference " + std::to_string(tex) + " out of range";
+      return false;
+    }
+  }
+  for (auto i = 0; i < (int)scene.instances.size(); i++) {
+    auto& instance = scene.instances[i];
+    auto  name     = element_name(scene.instance_names, i, "instance");
+    if (instance.shape < 0 || instance.shape >= (int)scene.shapes.size()) {
+      error = name + ": shape reference " + std::to_string(instance.shape) + " out of range";
+      return false;
+    }
+    if (instance.material < 0 || instance.material >= (int)scene.materials.size()) {
+      error = name + ": material reference " + std::to_string(instance.material) +
+              " out of range";
+      return false;
+    }
+    auto& shape    = scene.shapes[instance.shape];
+    auto& material = scene.materials[instance.material];
+    if (material.type == material_type::hair && !shape.triangles.empty()) {
+      error = name + ": hair " +
+              element_name(scene.material_names, instance.material, "material") +
+              " on triangle " + element_name(scene.shape_names, instance.shape, "shape") +
+              " (hair needs lines or curves)";
+      return false;
+    }
+    if (is_fiber(shape) && shape.radius.empty()) {
+      error = name + ": fiber " + element_name(scene.shape_names, instance.shape, "shape") +
+              " has no radius";
+      return false;
+    }
+  }
+  return true;
+}
+
+void add_missing_camera(scene_data& scene) {
+  if (!scene.cameras.empty()) return;
+  auto bounds = compute_bounds(scene);
+  if (empty(bounds)) bounds = {{-1, -1, -1}, {1, 1, 1}};
+  auto camera   = camera_data{};
+  camera.aspect = 1;
+  // Frame the bounding sphere with the camera's field of view.
+  auto radius   = length(size(bounds)) / 2;
+  auto fov      = 2 * std::atan(camera.film / (2 * camera.lens));
+  auto distance = radius / std::sin(fov / 2);
+  auto target   = center(bounds);
+  camera.frame  = lookat_frame(target + vec3f{0, 0, distance}, target, {0, 1, 0});
+  camera.focus  = distance;
+  scene.cameras.push_back(camera);
+  scene.camera_names.push_back("default");
+}
+
+}  // namespace yocto
