@@ -1,1 +1,234 @@
-// yocto_bvh: implementation (in progress)
+//
+// Implementation of Yocto/Bvh on Embree 3.
+//
+
+#include "yocto_bvh.h"
+
+#include <embree3/rtcore.h>
+
+#include <chrono>
+#include <mutex>
+
+// -----------------------------------------------------------------------------
+// EMBREE DEVICE
+// -----------------------------------------------------------------------------
+namespace yocto {
+
+// Embree reports errors through a callback; keep the first per build.
+struct embree_errors {
+  std::mutex  mutex;
+  std::string message;
+};
+
+static void embree_error_callback(void* user, RTCError code, const char* message) {
+  auto errors = (embree_errors*)user;
+  auto lock   = std::lock_guard{errors->mutex};
+  if (errors->message.empty())
+    errors->message = "embree error " + std::to_string((int)code) + ": " +
+                      (message ? message : "unknown");
+}
+
+// Tracks the bytes Embree allocates; never refuses an allocation.
+static bool embree_memory_callback(void* user, ssize_t bytes, bool) {
+  auto memory = (std::atomic<int64_t>*)user;
+  *memory += bytes;
+  return true;
+}
+
+}  // namespace yocto
+
+// -----------------------------------------------------------------------------
+// SHAPES
+// -----------------------------------------------------------------------------
+namespace yocto {
+
+// Vertices as Embree's float4 (position, radius).
+static vec4f fiber_vertex(const shape_data& shape, int index) {
+  auto r = index < (int)shape.radius.size() ? shape.radius[index] : 0.001f;
+  return {shape.positions[index], r};
+}
+
+// Embree's curve index buffers hold the first vertex of each segment and take
+// the next ones consecutively. Shapes whose elements are consecutive (strands)
+// share their vertices; others get a vertex copy per element.
+template <typename Element>
+static bool elements_are_consecutive(const std::vector<Element>& elements) {
+  for (auto& element : elements)
+    for (auto k = 1; k < (int)element.length(); k++)
+      if (element[k] != element[0] + k) return false;
+  return true;
+}
+
+template <typename Element>
+static RTCGeometry make_curve_geometry(
+    RTCDevice device, const shape_data& shape, const std::vector<Element>& elements,
+    RTCGeometryType type) {
+  auto geometry  = rtcNewGeometry(device, type);
+  auto degree    = (int)Element::length();
+  auto shared    = elements_are_consecutive(elements);
+  auto nvertices = shared ? shape.positions.size() : elements.size() * degree;
+  auto vertices  = (vec4f*)rtcSetNewGeometryBuffer(geometry, RTC_BUFFER_TYPE_VERTEX, 0,
+      RTC_FORMAT_FLOAT4, sizeof(vec4f), nvertices);
+  auto indices = (uint32_t*)rtcSetNewGeometryBuffer(geometry, RTC_BUFFER_TYPE_INDEX, 0,
+      RTC_FORMAT_UINT, sizeof(uint32_t), elements.size());
+  if (shared) {
+    for (auto i = 0; i < (int)nvertices; i++) vertices[i] = fiber_vertex(shape, i);
+    for (auto i = 0; i < (int)elements.size(); i++) indices[i] = elements[i][0];
+  } else {
+    for (auto i = 0; i < (int)elements.size(); i++) {
+      for (auto k = 0; k < degree; k++)
+        vertices[i * degree + k] = fiber_vertex(shape, elements[i][k]);
+      indices[i] = i * degree;
+    }
+  }
+  // Linear curves join smoothly only where told that a neighbor exists.
+  if (degree == 2) {
+    auto flags = (uint8_t*)rtcSetNewGeometryBuffer(geometry, RTC_BUFFER_TYPE_FLAGS, 0,
+        RTC_FORMAT_UCHAR, sizeof(uint8_t), elements.size());
+    for (auto i = 0; i < (int)elements.size(); i++) {
+      auto left  = shared && i > 0 && elements[i - 1][1] == elements[i][0];
+      auto right = shared && i + 1 < (int)elements.size() &&
+                   elements[i + 1][0] == elements[i][1];
+      flags[i] = (left ? RTC_CURVE_FLAG_NEIGHBOR_LEFT : 0) |
+                 (right ? RTC_CURVE_FLAG_NEIGHBOR_RIGHT : 0);
+    }
+  }
+  return geometry;
+}
+
+static RTCGeometry make_triangle_geometry(RTCDevice device, const shape_data& shape) {
+  auto geometry = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_TRIANGLE);
+  auto vertices = (vec3f*)rtcSetNewGeometryBuffer(geometry, RTC_BUFFER_TYPE_VERTEX, 0,
+      RTC_FORMAT_FLOAT3, sizeof(vec3f), shape.positions.size());
+  std::copy(shape.positions.begin(), shape.positions.end(), vertices);
+  auto indices = (vec3i*)rtcSetNewGeometryBuffer(geometry, RTC_BUFFER_TYPE_INDEX, 0,
+      RTC_FORMAT_UINT3, sizeof(vec3i), shape.triangles.size());
+  std::copy(shape.triangles.begin(), shape.triangles.end(), indices);
+  return geometry;
+}
+
+static RTCScene make_shape_scene(
+    RTCDevice device, const shape_data& shape, const bvh_params& params) {
+  auto scene = rtcNewScene(device);
+  rtcSetSceneFlags(scene, params.compact ? RTC_SCENE_FLAG_COMPACT : RTC_SCENE_FLAG_NONE);
+  rtcSetSceneBuildQuality(scene, RTC_BUILD_QUALITY_HIGH);
+  auto geometry = RTCGeometry{nullptr};
+  if (!shape.triangles.empty()) {
+    geometry = make_triangle_geometry(device, shape);
+  } else if (!shape.lines.empty()) {
+    geometry = make_curve_geometry(device, shape, shape.lines,
+        params.flat_curves ? RTC_GEOMETRY_TYPE_FLAT_LINEAR_CURVE
+                           : RTC_GEOMETRY_TYPE_ROUND_LINEAR_CURVE);
+  } else if (!shape.curves.empty()) {
+    geometry = make_curve_geometry(device, shape, shape.curves,
+        params.flat_curves ? RTC_GEOMETRY_TYPE_FLAT_BEZIER_CURVE
+                           : RTC_GEOMETRY_TYPE_ROUND_BEZIER_CURVE);
+  }
+  if (geometry) {
+    rtcCommitGeometry(geometry);
+    rtcAttachGeometryByID(scene, geometry, 0);
+    rtcReleaseGeometry(geometry);
+  }
+  rtcCommitScene(scene);
+  return scene;
+}
+
+}  // namespace yocto
+
+// -----------------------------------------------------------------------------
+// SCENE BVH
+// -----------------------------------------------------------------------------
+namespace yocto {
+
+bool make_scene_bvh(scene_bvh& bvh, const scene_data& scene, const bvh_params& params,
+    std::string& error) {
+  auto start  = std::chrono::steady_clock::now();
+  auto errors = std::make_shared<embree_errors>();
+  bvh         = {};
+  bvh.memory  = std::make_shared<std::atomic<int64_t>>(0);
+  auto device = rtcNewDevice(nullptr);
+  if (!device) {
+    error = "cannot create the Embree device";
+    return false;
+  }
+  // The device owns the error and memory callbacks' targets through captures.
+  auto memory = bvh.memory;
+  bvh.device  = std::shared_ptr<void>(
+      device, [errors, memory](void* d) { rtcReleaseDevice((RTCDevice)d); });
+  rtcSetDeviceErrorFunction(device, embree_error_callback, errors.get());
+  rtcSetDeviceMemoryMonitorFunction(device, embree_memory_callback, memory.get());
+
+  auto release_scene = [device_ref = bvh.device](void* s) { rtcReleaseScene((RTCScene)s); };
+  for (auto& shape : scene.shapes) {
+    bvh.shapes.push_back(
+        std::shared_ptr<void>(make_shape_scene(device, shape, params), release_scene));
+  }
+  auto top = rtcNewScene(device);
+  bvh.scene = std::shared_ptr<void>(top, release_scene);
+  rtcSetSceneBuildQuality(top, RTC_BUILD_QUALITY_HIGH);
+  for (auto i = 0; i < (int)scene.instances.size(); i++) {
+    auto& instance = scene.instances[i];
+    auto  geometry = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_INSTANCE);
+    rtcSetGeometryInstancedScene(geometry, (RTCScene)bvh.shapes[instance.shape].get());
+    // frame3f is 12 floats: axes then origin, i.e. a column-major 3x4 matrix.
+    rtcSetGeometryTransform(geometry, 0, RTC_FORMAT_FLOAT3X4_COLUMN_MAJOR, &instance.frame);
+    rtcCommitGeometry(geometry);
+    rtcAttachGeometryByID(top, geometry, i);
+    rtcReleaseGeometry(geometry);
+  }
+  rtcCommitScene(top);
+  bvh.peak_memory   = memory->load();
+  bvh.build_seconds = std::chrono::duration<double>(
+      std::chrono::steady_clock::now() - start).count();
+  if (!errors->message.empty()) {
+    error = errors->message;
+    bvh   = {};
+    return false;
+  }
+  return true;
+}
+
+static void init_embree_ray(RTCRay& r, const ray3f& ray) {
+  r.org_x = ray.o.x;
+  r.org_y = ray.o.y;
+  r.org_z = ray.o.z;
+  r.dir_x = ray.d.x;
+  r.dir_y = ray.d.y;
+  r.dir_z = ray.d.z;
+  r.tnear = ray.tmin;
+  r.tfar  = ray.tmax;
+  r.time  = 0;
+  r.mask  = (unsigned)-1;
+  r.id    = 0;
+  r.flags = 0;
+}
+
+scene_intersection intersect_scene_bvh(const scene_bvh& bvh, const ray3f& ray) {
+  auto context = RTCIntersectContext{};
+  rtcInitIntersectContext(&context);
+  auto rayhit = RTCRayHit{};
+  init_embree_ray(rayhit.ray, ray);
+  rayhit.hit.geomID    = RTC_INVALID_GEOMETRY_ID;
+  rayhit.hit.primID    = RTC_INVALID_GEOMETRY_ID;
+  rayhit.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+  rtcIntersect1((RTCScene)bvh.scene.get(), &context, &rayhit);
+  if (rayhit.hit.geomID == RTC_INVALID_GEOMETRY_ID) return {};
+  auto intersection     = scene_intersection{};
+  intersection.instance = (int)rayhit.hit.instID[0];
+  intersection.element  = (int)rayhit.hit.primID;
+  intersection.uv       = {rayhit.hit.u, rayhit.hit.v};
+  intersection.distance = rayhit.ray.tfar;
+  intersection.hit      = true;
+  return intersection;
+}
+
+bool intersect_scene_bvh_any(const scene_bvh& bvh, const ray3f& ray) {
+  auto context = RTCIntersectContext{};
+  rtcInitIntersectContext(&context);
+  auto r = RTCRay{};
+  init_embree_ray(r, ray);
+  rtcOccluded1((RTCScene)bvh.scene.get(), &context, &r);
+  return r.tfar < 0;  // Embree sets tfar to -inf on a hit
+}
+
+}  // namespace yocto

@@ -1,0 +1,61 @@
+//
+// # Yocto/Bvh: ray queries on Embree
+//
+// One Embree scene per shape (triangles, round linear curves for lines, round
+// cubic Bezier curves for curves, or ray-facing flat curves on request) and a
+// top-level scene of instances. Intersections return the instance, the
+// element and Embree's parametric coordinates; fiber geometry at a hit (tangent,
+// radius, signed offset h) is computed by `eval_fiber_hit` in yocto_scene.
+//
+
+#ifndef YOCTO_BVH_H_
+#define YOCTO_BVH_H_
+
+#include <atomic>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "yocto_scene.h"
+
+// -----------------------------------------------------------------------------
+// BVH
+// -----------------------------------------------------------------------------
+namespace yocto {
+
+struct bvh_params {
+  bool flat_curves = false;  // ray-facing flat curves instead of round tubes
+  bool compact     = false;  // Embree's compact layout: less memory, a bit slower
+};
+
+// Embree handles are shared pointers so that the struct copies and frees
+// itself; `memory` is what Embree allocated for this scene, in bytes.
+struct scene_bvh {
+  std::shared_ptr<void>              device = nullptr;
+  std::shared_ptr<void>              scene  = nullptr;
+  std::vector<std::shared_ptr<void>> shapes = {};
+  std::shared_ptr<std::atomic<int64_t>> memory      = nullptr;
+  int64_t                                 peak_memory = 0;
+  double                                  build_seconds = 0;
+};
+
+struct scene_intersection {
+  int   instance = -1;
+  int   element  = -1;
+  vec2f uv       = {0, 0};
+  float distance = 0;
+  bool  hit      = false;
+};
+
+// Builds the BVH; returns false with a message on an Embree error.
+bool make_scene_bvh(scene_bvh& bvh, const scene_data& scene, const bvh_params& params,
+    std::string& error);
+
+// Closest hit along the ray within [tmin, tmax].
+scene_intersection intersect_scene_bvh(const scene_bvh& bvh, const ray3f& ray);
+// Is anything hit within [tmin, tmax]? (shadow rays)
+bool intersect_scene_bvh_any(const scene_bvh& bvh, const ray3f& ray);
+
+}  // namespace yocto
+
+#endif
