@@ -239,3 +239,86 @@ void add_missing_camera(scene_data& scene) {
 }
 
 }  // namespace yocto
+
+// -----------------------------------------------------------------------------
+// HIT GEOMETRY
+// -----------------------------------------------------------------------------
+namespace yocto {
+
+surface_point eval_surface_point(const scene_data& scene, const instance_data& instance,
+    int element, const vec2f& uv) {
+  auto& shape    = scene.shapes[instance.shape];
+  auto  triangle = shape.triangles[element];
+  // Embree's barycentrics: p = (1 - u - v) p0 + u p1 + v p2.
+  auto w0 = 1 - uv.x - uv.y, w1 = uv.x, w2 = uv.y;
+  auto& p = shape.positions;
+  auto point     = surface_point{};
+  point.position = transform_point(instance.frame,
+      w0 * p[triangle.x] + w1 * p[triangle.y] + w2 * p[triangle.z]);
+  point.gnormal = transform_normal(instance.frame,
+      cross(p[triangle.y] - p[triangle.x], p[triangle.z] - p[triangle.x]));
+  point.normal = point.gnormal;
+  if (!shape.normals.empty()) {
+    auto& n = shape.normals;
+    auto  interpolated = w0 * n[triangle.x] + w1 * n[triangle.y] + w2 * n[triangle.z];
+    if (length(interpolated) > 0)
+      point.normal = transform_normal(instance.frame, interpolated);
+  }
+  if (!shape.texcoords.empty()) {
+    auto& t        = shape.texcoords;
+    point.texcoord = w0 * t[triangle.x] + w1 * t[triangle.y] + w2 * t[triangle.z];
+  }
+  if (!isfinite(point.gnormal)) point.gnormal = {0, 0, 1};
+  if (!isfinite(point.normal)) point.normal = point.gnormal;
+  return point;
+}
+
+fiber_point eval_fiber_point(const scene_data& scene, const instance_data& instance,
+    int element, float u, const ray3f& ray, float distance) {
+  auto& shape = scene.shapes[instance.shape];
+  auto& p     = shape.positions;
+  auto  r     = [&](int i) { return shape.radius.empty() ? 0.0f : shape.radius[i]; };
+  auto  axis = vec3f{0, 0, 0}, tangent = vec3f{1, 0, 0};
+  auto  radius = 0.0f;
+  if (!shape.lines.empty()) {
+    auto line = shape.lines[element];
+    axis      = p[line.x] * (1 - u) + p[line.y] * u;
+    tangent   = p[line.y] - p[line.x];
+    radius    = r(line.x) * (1 - u) + r(line.y) * u;
+  } else {
+    auto curve = shape.curves[element];
+    axis    = eval_bezier(p[curve.x], p[curve.y], p[curve.z], p[curve.w], u);
+    tangent = eval_bezier_derivative(p[curve.x], p[curve.y], p[curve.z], p[curve.w], u);
+    radius  = eval_bezier(r(curve.x), r(curve.y), r(curve.z), r(curve.w), u);
+    // A Bezier whose end control points coincide has no derivative at the end.
+    if (length(tangent) == 0) tangent = p[curve.w] - p[curve.x];
+  }
+  auto point     = fiber_point{};
+  point.position = ray.o + ray.d * distance;
+  point.axis     = transform_point(instance.frame, axis);
+  point.tangent  = safe_normalize(transform_vector(instance.frame, tangent));
+  point.radius   = radius * frame_scale(instance.frame);
+  if (point.tangent == vec3f{0, 0, 0}) point.tangent = {1, 0, 0};
+
+  // z: the direction back to the ray origin, made orthogonal to the tangent.
+  auto x = point.tangent;
+  auto z = -ray.d - dot(-ray.d, x) * x;
+  if (length(z) < 1e-6f) {
+    // The ray runs along the fiber: any normal will do, and h is 0.
+    auto basis  = basis_fromz(x);  // columns: two normals, then x
+    point.frame = {basis[2], basis[0], basis[1], point.position};
+    point.h     = 0;
+  } else {
+    z           = normalize(z);
+    auto y      = cross(z, x);
+    point.frame = {x, y, z, point.position};
+    // The ray moves only within the x-z plane, so every point on it has the
+    // same y offset from the axis: the signed ray-axis distance.
+    auto offset = dot(ray.o - point.axis, y);
+    point.h     = point.radius > 0 ? std::clamp(offset / point.radius, -1.0f, 1.0f) : 0.0f;
+  }
+  point.normal = point.frame.z * safe_sqrt(1 - point.h * point.h) + point.frame.y * point.h;
+  return point;
+}
+
+}  // namespace yocto

@@ -170,6 +170,35 @@ inline vec3f eval_bezier_derivative(
   return 3 * v * v * (p1 - p0) + 6 * v * u * (p2 - p1) + 3 * u * u * (p3 - p2);
 }
 
+// Geometry of a triangle hit at Embree's barycentric uv: world position,
+// interpolated shading normal (geometric if the shape has none), geometric
+// normal and texture coordinates.
+struct surface_point {
+  vec3f position  = {0, 0, 0};
+  vec3f normal    = {0, 0, 1};
+  vec3f gnormal   = {0, 0, 1};
+  vec2f texcoord  = {0, 0};
+};
+surface_point eval_surface_point(const scene_data& scene, const instance_data& instance,
+    int element, const vec2f& uv);
+
+// Geometry of a fiber hit (line or curve element at parameter u) seen along a
+// ray: the point on the axis, the tangent, the radius and the signed offset h
+// in [-1, 1] of the ray from the axis over the radius. The frame has x = the
+// tangent, z = the normal facing back along the ray (-d with its tangent
+// component removed) and y = z x x, so that h = dot(hit - axis, y) / radius.
+struct fiber_point {
+  vec3f   position = {0, 0, 0};  // hit point on the fiber's surface
+  vec3f   axis     = {0, 0, 0};  // point on the axis at u
+  vec3f   tangent  = {1, 0, 0};
+  float   radius   = 0;
+  float   h        = 0;
+  frame3f frame    = {};
+  vec3f   normal   = {0, 0, 1};  // surface normal of a round fiber at h
+};
+fiber_point eval_fiber_point(const scene_data& scene, const instance_data& instance,
+    int element, float u, const ray3f& ray, float distance);
+
 // Checks references and sizes; returns false with a message naming the element.
 bool validate_scene(const scene_data& scene, std::string& error);
 
