@@ -1,1 +1,292 @@
-int main() { return 0; }
+//
+// yscene: render, inspect and convert hair scenes.
+//
+
+#include <sys/resource.h>
+
+#include <CLI/CLI.hpp>
+#include <atomic>
+#include <chrono>
+#include <csignal>
+#include <cstdio>
+#include <yocto/yocto_bvh.h>
+#include <yocto/yocto_pbrtio.h>
+#include <yocto/yocto_sceneio.h>
+#include <yocto/yocto_trace.h>
+
+using namespace yocto;
+
+// -----------------------------------------------------------------------------
+// HELPERS
+// -----------------------------------------------------------------------------
+
+static int print_error(const std::string& message) {
+  std::fprintf(stderr, "error: %s\n", message.c_str());
+  return 1;
+}
+
+static double seconds_since(std::chrono::steady_clock::time_point start) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+}
+
+static std::string format_duration(double seconds) {
+  auto total = (int64_t)(seconds + 0.5);
+  char buffer[64];
+  std::snprintf(buffer, sizeof(buffer), "%02d:%02d:%02d", (int)(total / 3600),
+      (int)((total / 60) % 60), (int)(total % 60));
+  return buffer;
+}
+
+static std::string format_count(double count) {
+  char buffer[64];
+  if (count >= 1e9) std::snprintf(buffer, sizeof(buffer), "%.2fG", count / 1e9);
+  else if (count >= 1e6) std::snprintf(buffer, sizeof(buffer), "%.2fM", count / 1e6);
+  else if (count >= 1e3) std::snprintf(buffer, sizeof(buffer), "%.2fk", count / 1e3);
+  else std::snprintf(buffer, sizeof(buffer), "%.0f", count);
+  return buffer;
+}
+
+// Peak resident memory of this process in bytes.
+static int64_t peak_memory() {
+  auto usage = rusage{};
+  getrusage(RUSAGE_SELF, &usage);
+  return (int64_t)usage.ru_maxrss * 1024;
+}
+
+// Loads a scene by extension: json, pbrt, or a Cem Yuksel .hair model.
+static bool load_any_scene(const std::string& filename, scene_data& scene,
+    std::string& error, const pbrt_params& params) {
+  auto extension = path_extension(filename);
+  if (extension == ".pbrt" || extension == ".gz") {
+    return load_pbrt_scene(filename, scene, error, params);
+  } else if (extension == ".hair") {
+    return load_hair_scene(filename, scene, error);
+  } else {
+    return load_scene(filename, scene, error);
+  }
+}
+
+// -----------------------------------------------------------------------------
+// RENDER
+// -----------------------------------------------------------------------------
+
+static std::atomic<bool> interrupted = false;
+static void handle_sigint(int) { interrupted = true; }
+
+struct render_options {
+  std::string scene    = "";
+  std::string output   = "";
+  std::string camera   = "";
+  float       exposure = 0;
+  bool        flat_curves = false;
+  bool        quiet       = false;
+};
+
+static int run_render(const render_options& options, trace_params params,
+    const CLI::App& command) {
+  if (!is_image_filename(options.output))
+    return print_error(options.output + ": unknown image extension (use exr, hdr, pfm, png or jpg)");
+  auto start = std::chrono::steady_clock::now();
+  auto scene = scene_data{};
+  auto error = std::string{};
+  if (!load_any_scene(options.scene, scene, error, {})) return print_error(error);
+  add_missing_camera(scene);
+  // Settings carried by the scene file are defaults the command line overrides.
+  if (scene.settings.samples > 0 && command.count("--samples") == 0)
+    params.samples = scene.settings.samples;
+  if (scene.settings.bounces > 0 && command.count("--bounces") == 0)
+    params.bounces = scene.settings.bounces;
+  if (scene.settings.resolution > 0 && command.count("--resolution") == 0)
+    params.resolution = scene.settings.resolution;
+  if (!options.camera.empty()) {
+    auto found = std::find(scene.camera_names.begin(), scene.camera_names.end(), options.camera);
+    if (found == scene.camera_names.end())
+      return print_error(options.scene + ": no camera named " + options.camera);
+    params.camera = (int)(found - scene.camera_names.begin());
+  }
+  if (!check_trace_params(scene, params, error)) return print_error(error);
+  auto load_time = seconds_since(start);
+
+  auto bvh = scene_bvh{};
+  if (!make_scene_bvh(bvh, scene, {options.flat_curves, false}, error))
+    return print_error(options.scene + ": " + error);
+  auto lights = make_trace_lights(scene);
+  auto state  = trace_state{};
+  init_trace_state(state, scene, params);
+  if (!options.quiet)
+    std::fprintf(stderr, "loaded %s in %.2fs, bvh in %.2fs (%s bytes); rendering %dx%d\n",
+        options.scene.c_str(), load_time, bvh.build_seconds,
+        format_count((double)bvh.peak_memory).c_str(), state.width, state.height);
+
+  // Passes of one sample per pixel: Ctrl-C ends the current pass and saves.
+  interrupted         = false;
+  auto previous       = std::signal(SIGINT, handle_sigint);
+  auto render_start   = std::chrono::steady_clock::now();
+  auto last_progress  = -1.0;
+  while (state.samples < params.samples && !interrupted) {
+    trace_samples(state, scene, bvh, lights, params, 1);
+    auto elapsed = seconds_since(render_start);
+    if (!options.quiet && (elapsed - last_progress > 0.25 || state.samples == params.samples)) {
+      last_progress = elapsed;
+      auto fraction = (double)state.samples / params.samples;
+      auto eta      = elapsed / fraction - elapsed;
+      auto bar      = std::string(30, ' ');
+      for (auto i = 0; i < (int)(fraction * 30); i++) bar[i] = '#';
+      std::fprintf(stderr, "\r[%s] %d/%d spp  elapsed %s  eta %s ", bar.c_str(),
+          state.samples, params.samples, format_duration(elapsed).c_str(),
+          format_duration(eta).c_str());
+    }
+  }
+  std::signal(SIGINT, previous);
+  auto render_time = seconds_since(render_start);
+  if (!options.quiet) std::fprintf(stderr, "\n");
+  if (interrupted)
+    std::fprintf(stderr, "interrupted: saving the %d samples per pixel done\n", state.samples);
+  if (state.nonfinite > 0)
+    std::fprintf(stderr, "warning: %lld NaN or Inf samples were dropped\n",
+        (long long)state.nonfinite.load());
+
+  auto image = get_image(state);
+  if (!save_image(options.output, image, error, options.exposure)) return print_error(error);
+  auto samples = (double)state.width * state.height * state.samples;
+  std::printf("rendered %s: %dx%d, %d spp in %.2fs (%s samples/s, %s rays/s, peak memory %s bytes)\n",
+      options.output.c_str(), state.width, state.height, state.samples, render_time,
+      format_count(samples / render_time).c_str(),
+      format_count((double)state.rays / render_time).c_str(),
+      format_count((double)peak_memory()).c_str());
+  return 0;
+}
+
+// -----------------------------------------------------------------------------
+// INFO
+// -----------------------------------------------------------------------------
+
+static int run_info(const std::string& filename) {
+  auto scene = scene_data{};
+  auto error = std::string{};
+  if (!load_any_scene(filename, scene, error, {})) return print_error(error);
+  auto triangles = (size_t)0, lines = (size_t)0, curves = (size_t)0, vertices = (size_t)0;
+  auto bytes = (size_t)0;
+  for (auto& shape : scene.shapes) {
+    triangles += shape.triangles.size();
+    lines += shape.lines.size();
+    curves += shape.curves.size();
+    vertices += shape.positions.size();
+    bytes += shape.triangles.size() * sizeof(vec3i) + shape.lines.size() * sizeof(vec2i) +
+             shape.curves.size() * sizeof(vec4i) + shape.positions.size() * sizeof(vec3f) +
+             shape.normals.size() * sizeof(vec3f) + shape.texcoords.size() * sizeof(vec2f) +
+             shape.radius.size() * sizeof(float);
+  }
+  for (auto& texture : scene.textures) bytes += texture.pixels.size() * sizeof(vec3f);
+  auto bounds = compute_bounds(scene);
+  std::printf("scene:        %s\n", filename.c_str());
+  std::printf("cameras:      %zu\n", scene.cameras.size());
+  std::printf("environments: %zu\n", scene.environments.size());
+  std::printf("shapes:       %zu\n", scene.shapes.size());
+  std::printf("instances:    %zu\n", scene.instances.size());
+  std::printf("materials:    %zu\n", scene.materials.size());
+  std::printf("textures:     %zu\n", scene.textures.size());
+  std::printf("vertices:     %zu\n", vertices);
+  std::printf("triangles:    %zu\n", triangles);
+  std::printf("fiber segments: %zu (%zu lines, %zu curves)\n", lines + curves, lines, curves);
+  std::printf("memory:       %s bytes\n", format_count((double)bytes).c_str());
+  if (!empty(bounds)) {
+    std::printf("bounds:       [%g %g %g] - [%g %g %g]\n", bounds.min.x, bounds.min.y,
+        bounds.min.z, bounds.max.x, bounds.max.y, bounds.max.z);
+  } else {
+    std::printf("bounds:       empty\n");
+  }
+  return 0;
+}
+
+// -----------------------------------------------------------------------------
+// CONVERT
+// -----------------------------------------------------------------------------
+
+static int run_convert(const std::string& input, const std::string& output,
+    const pbrt_params& params) {
+  if (path_extension(output) != ".json")
+    return print_error(output + ": the output must be a .json scene");
+  auto scene = scene_data{};
+  auto error = std::string{};
+  auto start = std::chrono::steady_clock::now();
+  if (!load_any_scene(input, scene, error, params)) return print_error(error);
+  if (params.curves_as_lines) {
+    for (auto& shape : scene.shapes)
+      if (!shape.curves.empty()) shape = curves_to_lines(shape, params.segments);
+  }
+  if (!save_scene(output, scene, error)) return print_error(error);
+  auto curves = (size_t)0, lines = (size_t)0;
+  for (auto& shape : scene.shapes) {
+    curves += shape.curves.size();
+    lines += shape.lines.size();
+  }
+  std::printf("converted %s to %s in %.2fs: %zu shapes, %zu curves, %zu lines\n",
+      input.c_str(), output.c_str(), seconds_since(start), scene.shapes.size(), curves, lines);
+  return 0;
+}
+
+// -----------------------------------------------------------------------------
+// MAIN
+// -----------------------------------------------------------------------------
+
+int main(int argc, const char** argv) {
+  auto app = CLI::App{"yscene: render, inspect and convert hair scenes"};
+  app.require_subcommand(1);
+
+  auto render_opts = render_options{};
+  auto params      = trace_params{};
+  auto sampler     = std::string{"path"};
+  auto render      = app.add_subcommand("render", "render a scene to an image");
+  render->add_option("scene", render_opts.scene, "scene (json, pbrt or hair)")->required();
+  render->add_option("--output,-o", render_opts.output, "output image (exr, hdr, pfm, png, jpg)")
+      ->required();
+  render->add_option("--samples,-s", params.samples, "samples per pixel");
+  render->add_option("--resolution,-r", params.resolution, "largest image side in pixels");
+  render->add_option("--sampler", sampler, "path (MIS) or naive (BSDF sampling only)")
+      ->check(CLI::IsMember({"path", "naive"}));
+  render->add_option("--bounces,-b", params.bounces, "maximum path length");
+  render->add_option("--threads,-t", params.threads, "threads (0 = all cores)");
+  render->add_option("--seed", params.seed, "random seed");
+  render->add_option("--clamp", params.clamp, "clamp sample values (0 = off)");
+  render->add_option("--exposure,-e", render_opts.exposure, "exposure for png/jpg (stops)");
+  render->add_option("--camera", render_opts.camera, "camera name");
+  render->add_flag("--flat-curves", render_opts.flat_curves, "ray-facing flat fibers");
+  render->add_flag("--hair-four-numbers", params.hair_four_numbers,
+      "sample hair with four random numbers instead of demuxing two");
+  render->add_flag("--quiet,-q", render_opts.quiet, "no progress output");
+
+  auto info_scene = std::string{};
+  auto info       = app.add_subcommand("info", "print scene statistics");
+  info->add_option("scene", info_scene, "scene (json, pbrt or hair)")->required();
+
+  auto convert_in = std::string{}, convert_out = std::string{}, curves_mode = std::string{"native"};
+  auto pbrt       = pbrt_params{};
+  auto convert    = app.add_subcommand("convert", "convert pbrt or hair to a json scene");
+  convert->add_option("input", convert_in, "input scene (pbrt, pbrt.gz or hair)")->required();
+  convert->add_option("output", convert_out, "output json scene")->required();
+  convert->add_option("--curves", curves_mode, "native Bezier curves or line segments")
+      ->check(CLI::IsMember({"native", "lines"}));
+  convert->add_option("--segments", pbrt.segments, "line segments per curve")
+      ->check(CLI::Range(1, 64));
+  convert->add_flag("--lenient", pbrt.lenient, "unknown pbrt directives are warnings");
+
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    // Help exits 0; every command-line error exits 1 as other errors do.
+    auto code = app.exit(e);
+    return code == 0 ? 0 : 1;
+  }
+
+  if (render->parsed()) {
+    params.sampler = sampler == "naive" ? trace_sampler_type::naive : trace_sampler_type::path;
+    return run_render(render_opts, params, *render);
+  } else if (info->parsed()) {
+    return run_info(info_scene);
+  } else if (convert->parsed()) {
+    pbrt.curves_as_lines = curves_mode == "lines";
+    return run_convert(convert_in, convert_out, pbrt);
+  }
+  return 1;
+}

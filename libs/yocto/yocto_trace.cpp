@@ -1,1 +1,501 @@
-// yocto_trace: implementation (in progress)
+//
+// Implementation of Yocto/Trace.
+//
+
+#include "yocto_trace.h"
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
+
+#include <yocto_hair/yocto_hair.h>
+
+// -----------------------------------------------------------------------------
+// MATERIALS
+// -----------------------------------------------------------------------------
+namespace yocto {
+
+// What shading needs at a hit.
+struct trace_point {
+  vec3f          position = {0, 0, 0};
+  vec3f          normal   = {0, 0, 1};  // shading normal, facing the outgoing side
+  vec3f          emission = {0, 0, 0};
+  vec3f          color    = {0, 0, 0};
+  float          roughness = 0;
+  float          ior       = 1.5f;
+  material_type  type      = material_type::matte;
+  bool           fiber     = false;
+  vec3f          axis      = {0, 0, 0};  // fibers: point on the axis
+  float          radius    = 0;          // fibers: radius at the hit
+  vec3f          tangent   = {1, 0, 0};  // fibers
+  hair_brdf      hair      = {};
+};
+
+static bool is_delta_free_black(const trace_point& point) {
+  return point.type != material_type::hair && point.color == vec3f{0, 0, 0} &&
+         point.type == material_type::matte;
+}
+
+// Fresnel reflectance of a dielectric interface (unpolarised).
+static float fresnel_dielectric(float eta, float cos_w) {
+  cos_w       = std::abs(cos_w);
+  auto sin2_t = (1 - cos_w * cos_w) / (eta * eta);
+  if (sin2_t >= 1) return 1;
+  auto cos_t = safe_sqrt(1 - sin2_t);
+  auto rs    = (cos_w - eta * cos_t) / (cos_w + eta * cos_t);
+  auto rp    = (eta * cos_w - cos_t) / (eta * cos_w + cos_t);
+  return (rs * rs + rp * rp) / 2;
+}
+
+// GGX distribution and Smith masking (Walter et al., Microfacet Models for
+// Refraction through Rough Surfaces, EGSR 2007), alpha = roughness^2.
+static float ggx_distribution(float alpha, float cos_h) {
+  if (cos_h <= 0) return 0;
+  auto a2 = alpha * alpha, c2 = cos_h * cos_h;
+  return a2 / (pif * sqr(c2 * (a2 - 1) + 1));
+}
+static float ggx_smith_g1(float alpha, float cos_w) {
+  auto c2 = cos_w * cos_w;
+  return 2 / (1 + std::sqrt(1 + alpha * alpha * (1 - c2) / std::max(c2, 1e-12f)));
+}
+static float glossy_alpha(float roughness) { return std::max(sqr(roughness), 1e-3f); }
+
+static vec3f eval_bsdfcos(const trace_point& point, const vec3f& outgoing, const vec3f& incoming) {
+  if (point.type == material_type::hair) {
+    return eval_hair_scattering(point.hair, outgoing, incoming);
+  }
+  auto cos_i = dot(point.normal, incoming), cos_o = dot(point.normal, outgoing);
+  if (cos_i <= 0 || cos_o <= 0) return {0, 0, 0};
+  if (point.type == material_type::matte) return point.color / pif * cos_i;
+  // glossy: GGX coat over a Lambertian base
+  auto alpha   = glossy_alpha(point.roughness);
+  auto half    = normalize(incoming + outgoing);
+  auto fresnel = fresnel_dielectric(point.ior, dot(half, outgoing));
+  auto base    = 1 - fresnel_dielectric(point.ior, cos_o);
+  auto specular = fresnel * ggx_distribution(alpha, dot(point.normal, half)) *
+                  ggx_smith_g1(alpha, cos_o) * ggx_smith_g1(alpha, cos_i) / (4 * cos_o);
+  return point.color / pif * base * cos_i + vec3f{specular, specular, specular};
+}
+
+static float sample_bsdfcos_pdf(
+    const trace_point& point, const vec3f& outgoing, const vec3f& incoming) {
+  if (point.type == material_type::hair) {
+    return sample_hair_scattering_pdf(point.hair, outgoing, incoming);
+  }
+  auto cos_i = dot(point.normal, incoming), cos_o = dot(point.normal, outgoing);
+  if (cos_i <= 0 || cos_o <= 0) return 0;
+  if (point.type == material_type::matte) return cos_i / pif;
+  auto alpha     = glossy_alpha(point.roughness);
+  auto half      = normalize(incoming + outgoing);
+  auto specular  = fresnel_dielectric(point.ior, cos_o);
+  auto pdf_half  = ggx_distribution(alpha, dot(point.normal, half)) * dot(point.normal, half);
+  return specular * pdf_half / (4 * std::abs(dot(outgoing, half))) +
+         (1 - specular) * cos_i / pif;
+}
+
+static vec3f sample_bsdfcos(const trace_point& point, const vec3f& outgoing, float rnl,
+    const vec2f& rn, const trace_params& params, rng_state& rng) {
+  if (point.type == material_type::hair) {
+    if (params.hair_four_numbers) {
+      auto more = rand2f(rng);
+      return sample_hair_scattering(point.hair, outgoing, vec4f{rn.x, rn.y, more.x, more.y});
+    }
+    return sample_hair_scattering(point.hair, outgoing, rn);
+  }
+  if (point.type == material_type::matte) return sample_hemisphere_cos(point.normal, rn);
+  auto specular = fresnel_dielectric(point.ior, dot(point.normal, outgoing));
+  if (rnl >= specular) return sample_hemisphere_cos(point.normal, rn);
+  // GGX half vector: tan^2 theta = alpha^2 u / (1 - u).
+  auto alpha = glossy_alpha(point.roughness);
+  auto phi   = 2 * pif * rn.x;
+  auto tan2  = alpha * alpha * rn.y / std::max(1 - rn.y, 1e-7f);
+  auto cos_h = 1 / std::sqrt(1 + tan2), sin_h = safe_sqrt(1 - cos_h * cos_h);
+  auto local = vec3f{sin_h * std::cos(phi), sin_h * std::sin(phi), cos_h};
+  auto half  = normalize(basis_fromz(point.normal) * local);
+  return reflect(outgoing, half);
+}
+
+}  // namespace yocto
+
+// -----------------------------------------------------------------------------
+// LIGHTS
+// -----------------------------------------------------------------------------
+namespace yocto {
+
+trace_lights make_trace_lights(const scene_data& scene) {
+  auto lights = trace_lights{};
+  for (auto i = 0; i < (int)scene.instances.size(); i++) {
+    auto& instance = scene.instances[i];
+    auto& material = scene.materials[instance.material];
+    auto& shape    = scene.shapes[instance.shape];
+    if (material.emission == vec3f{0, 0, 0} || shape.triangles.empty()) continue;
+    auto light     = trace_light{};
+    light.instance = i;
+    auto total     = 0.0f;
+    for (auto& t : shape.triangles) {
+      auto p0 = transform_point(instance.frame, shape.positions[t.x]);
+      auto p1 = transform_point(instance.frame, shape.positions[t.y]);
+      auto p2 = transform_point(instance.frame, shape.positions[t.z]);
+      total += length(cross(p1 - p0, p2 - p0)) / 2;
+      light.cdf.push_back(total);
+    }
+    if (total > 0) lights.lights.push_back(light);
+  }
+  for (auto i = 0; i < (int)scene.environments.size(); i++) {
+    auto& environment = scene.environments[i];
+    if (environment.emission == vec3f{0, 0, 0}) continue;
+    auto light        = trace_light{};
+    light.environment = i;
+    if (environment.emission_tex >= 0) {
+      auto& texture = scene.textures[environment.emission_tex];
+      auto  total   = 0.0f;
+      for (auto j = 0; j < texture.height; j++) {
+        auto sin_theta = std::sin((j + 0.5f) * pif / texture.height);
+        for (auto k = 0; k < texture.width; k++) {
+          auto value = max_component(texture.pixels[(size_t)j * texture.width + k]);
+          total += std::max(value, 0.0f) * sin_theta;
+          light.cdf.push_back(total);
+        }
+      }
+      if (total <= 0) continue;
+    }
+    lights.lights.push_back(light);
+  }
+  for (auto i = 0; i < (int)scene.distant_lights.size(); i++) {
+    if (scene.distant_lights[i].emission == vec3f{0, 0, 0}) continue;
+    auto light    = trace_light{};
+    light.distant = i;
+    lights.lights.push_back(light);
+  }
+  return lights;
+}
+
+// Direction pdf (solid angle) of sampling the environment texture.
+static float environment_texture_pdf(const scene_data& scene, const trace_light& light,
+    const vec3f& direction) {
+  auto& environment = scene.environments[light.environment];
+  auto& texture     = scene.textures[environment.emission_tex];
+  auto  local = transform_direction(inverse(environment.frame, false), direction);
+  auto  uv    = direction_to_equirect(local);
+  auto  i     = std::clamp((int)(uv.x * texture.width), 0, texture.width - 1);
+  auto  j     = std::clamp((int)(uv.y * texture.height), 0, texture.height - 1);
+  auto  prob  = sample_discrete_pdf(light.cdf, j * texture.width + i);
+  auto  sin_theta = std::sin((j + 0.5f) * pif / texture.height);
+  if (sin_theta <= 0) return 0;
+  return prob * texture.width * texture.height / (2 * pif * pif * sin_theta);
+}
+
+// Samples a direction towards a light from a point; returns the direction and
+// sets distance (flt_max for environments and distant lights).
+static vec3f sample_light(const scene_data& scene, const trace_light& light,
+    const vec3f& position, float rel, const vec2f& ruv) {
+  if (light.instance >= 0) {
+    auto& instance = scene.instances[light.instance];
+    auto& shape    = scene.shapes[instance.shape];
+    auto  element  = sample_discrete(light.cdf, rel);
+    auto  uv       = sample_triangle(ruv);
+    auto  t        = shape.triangles[element];
+    auto  p = (1 - uv.x - uv.y) * shape.positions[t.x] + uv.x * shape.positions[t.y] +
+             uv.y * shape.positions[t.z];
+    return safe_normalize(transform_point(instance.frame, p) - position);
+  } else if (light.environment >= 0) {
+    auto& environment = scene.environments[light.environment];
+    if (environment.emission_tex < 0) return sample_sphere(ruv);
+    auto& texture = scene.textures[environment.emission_tex];
+    auto  index   = sample_discrete(light.cdf, rel);
+    auto  uv      = vec2f{((index % texture.width) + ruv.x) / texture.width,
+        ((index / texture.width) + ruv.y) / texture.height};
+    return transform_direction(environment.frame, equirect_to_direction(uv));
+  } else {
+    return normalize(scene.distant_lights[light.distant].direction);
+  }
+}
+
+}  // namespace yocto
+
+// -----------------------------------------------------------------------------
+// PATH TRACING
+// -----------------------------------------------------------------------------
+namespace yocto {
+
+static vec3f eval_environments(const scene_data& scene, const vec3f& direction) {
+  auto radiance = vec3f{0, 0, 0};
+  for (auto& environment : scene.environments)
+    radiance += eval_environment(scene, environment, direction);
+  return radiance;
+}
+
+static trace_point eval_trace_point(const scene_data& scene,
+    const scene_intersection& intersection, const ray3f& ray) {
+  auto& instance = scene.instances[intersection.instance];
+  auto& material = scene.materials[instance.material];
+  auto& shape    = scene.shapes[instance.shape];
+  auto  point    = trace_point{};
+  point.type      = material.type;
+  point.color     = material.color;
+  point.roughness = material.roughness;
+  point.ior       = material.ior;
+  point.emission  = material.emission;
+  auto texcoord   = vec2f{0, 0};
+  if (!shape.triangles.empty()) {
+    auto surface   = eval_surface_point(scene, instance, intersection.element, intersection.uv);
+    point.position = surface.position;
+    texcoord       = surface.texcoord;
+    // Emission only from the front face; shading from either side.
+    if (dot(surface.gnormal, -ray.d) < 0) point.emission = {0, 0, 0};
+    point.normal = dot(surface.normal, -ray.d) >= 0 ? surface.normal : -surface.normal;
+  } else {
+    auto fiber = eval_fiber_point(scene, instance, intersection.element, intersection.uv.x,
+        ray, intersection.distance);
+    point.fiber    = true;
+    point.position = fiber.position;
+    point.axis     = fiber.axis;
+    point.radius   = fiber.radius;
+    point.tangent  = fiber.tangent;
+    point.normal   = fiber.normal;
+    if (material.type == material_type::hair) {
+      point.hair = eval_hair_brdf(material.hair, fiber.h, fiber.frame);
+    }
+  }
+  if (material.color_tex >= 0)
+    point.color *= eval_texture(scene.textures[material.color_tex], texcoord);
+  if (material.emission_tex >= 0)
+    point.emission *= eval_texture(scene.textures[material.emission_tex], texcoord);
+  return point;
+}
+
+// A ray leaving a point. Fiber rays start just outside the fiber on the side
+// they head to, so that a transmitted path does not hit the same fiber again:
+// the hair BSDF already accounts for the whole passage through it.
+static ray3f spawn_ray(const trace_point& point, const vec3f& direction) {
+  if (point.fiber) {
+    auto side = direction - dot(direction, point.tangent) * point.tangent;
+    side      = length(side) > 1e-6f ? normalize(side) : point.normal;
+    auto o    = point.axis + side * (point.radius * 1.01f);
+    return {o, direction, point.radius * 0.01f + ray_eps * 0.1f, flt_max};
+  }
+  auto scale  = std::max(1.0f, max_component(abs(point.position)));
+  auto offset = point.normal * (ray_eps * scale);
+  auto o      = point.position + (dot(direction, point.normal) >= 0 ? offset : -offset);
+  return {o, direction, 0, flt_max};
+}
+
+static float power_heuristic(float pdf_a, float pdf_b) {
+  auto a = pdf_a * pdf_a, b = pdf_b * pdf_b;
+  return a + b > 0 ? a / (a + b) : 0;
+}
+
+// Solid-angle pdf that light sampling would have produced for a BSDF ray that
+// hit an area light (at distance, with cosine at the light) or escaped.
+static float area_light_pdf(const scene_data& scene, const trace_lights& lights,
+    int instance, float distance, float cos_light) {
+  for (auto& light : lights.lights) {
+    if (light.instance != instance) continue;
+    if (cos_light <= 0) return 0;
+    auto area = light.cdf.back();
+    return distance * distance / (cos_light * area) / lights.lights.size();
+  }
+  return 0;
+}
+static float environment_light_pdf(const scene_data& scene, const trace_lights& lights,
+    const vec3f& direction) {
+  auto pdf = 0.0f;
+  for (auto& light : lights.lights) {
+    if (light.environment < 0) continue;
+    pdf += scene.environments[light.environment].emission_tex >= 0
+               ? environment_texture_pdf(scene, light, direction)
+               : 1 / (4 * pif);
+  }
+  return pdf / std::max((int)lights.lights.size(), 1);
+}
+
+vec3f trace_radiance(const scene_data& scene, const scene_bvh& bvh,
+    const trace_lights& lights, const ray3f& camera_ray, rng_state& rng,
+    const trace_params& params, int64_t& rays) {
+  auto radiance  = vec3f{0, 0, 0};
+  auto weight    = vec3f{1, 1, 1};
+  auto ray       = camera_ray;
+  auto bsdf_pdf  = 0.0f;  // pdf of the last BSDF sample, 0 for camera rays
+  auto use_mis   = params.sampler == trace_sampler_type::path;
+  for (auto bounce = 0; bounce < params.bounces; bounce++) {
+    auto intersection = intersect_scene_bvh(bvh, ray);
+    rays++;
+    if (!intersection.hit) {
+      auto emission = eval_environments(scene, ray.d);
+      if (emission != vec3f{0, 0, 0}) {
+        auto mis = use_mis && bsdf_pdf > 0
+                       ? power_heuristic(bsdf_pdf, environment_light_pdf(scene, lights, ray.d))
+                       : 1.0f;
+        radiance += weight * emission * mis;
+      }
+      break;
+    }
+    auto point    = eval_trace_point(scene, intersection, ray);
+    auto outgoing = -ray.d;
+    if (point.emission != vec3f{0, 0, 0}) {
+      auto mis = 1.0f;
+      if (use_mis && bsdf_pdf > 0) {
+        auto surface = eval_surface_point(scene, scene.instances[intersection.instance],
+            intersection.element, intersection.uv);
+        auto light_pdf = area_light_pdf(scene, lights, intersection.instance,
+            intersection.distance, std::abs(dot(surface.gnormal, outgoing)));
+        mis = power_heuristic(bsdf_pdf, light_pdf);
+      }
+      radiance += weight * point.emission * mis;
+    }
+    if (is_delta_free_black(point)) break;
+
+    // Next-event estimation: one light, one shadow ray.
+    if (use_mis && !lights.lights.empty()) {
+      auto  nlights  = (int)lights.lights.size();
+      auto& light    = lights.lights[std::min(rand1i(rng, nlights), nlights - 1)];
+      auto  rel      = rand1f(rng);
+      auto  ruv      = rand2f(rng);
+      auto  incoming = sample_light(scene, light, point.position, rel, ruv);
+      auto  bsdfcos  = incoming == vec3f{0, 0, 0} ? vec3f{0, 0, 0}
+                                                 : eval_bsdfcos(point, outgoing, incoming);
+      if (bsdfcos != vec3f{0, 0, 0}) {
+        auto shadow   = spawn_ray(point, incoming);
+        auto emission = vec3f{0, 0, 0};
+        auto pdf      = 0.0f;
+        auto delta    = false;
+        if (light.instance >= 0) {
+          auto hit = intersect_scene_bvh(bvh, shadow);
+          if (hit.hit && hit.instance == light.instance) {
+            auto lpoint = eval_trace_point(scene, hit, shadow);
+            auto surface = eval_surface_point(
+                scene, scene.instances[hit.instance], hit.element, hit.uv);
+            emission = lpoint.emission;
+            pdf = area_light_pdf(scene, lights, hit.instance, hit.distance,
+                std::abs(dot(surface.gnormal, incoming)));
+          }
+        } else if (!intersect_scene_bvh_any(bvh, shadow)) {
+          if (light.environment >= 0) {
+            emission = eval_environment(scene, scene.environments[light.environment], incoming);
+            auto& environment = scene.environments[light.environment];
+            pdf = (environment.emission_tex >= 0 ? environment_texture_pdf(scene, light, incoming)
+                                                 : 1 / (4 * pif)) / nlights;
+          } else {
+            emission = scene.distant_lights[light.distant].emission;
+            pdf      = 1.0f / nlights;
+            delta    = true;
+          }
+        }
+        rays++;
+        if (pdf > 0 && emission != vec3f{0, 0, 0}) {
+          auto mis = delta ? 1.0f
+                           : power_heuristic(pdf, sample_bsdfcos_pdf(point, outgoing, incoming));
+          radiance += weight * bsdfcos * emission * (mis / pdf);
+        }
+      }
+    }
+
+    // BSDF sampling.
+    auto rnl      = rand1f(rng);
+    auto rn       = rand2f(rng);
+    auto incoming = sample_bsdfcos(point, outgoing, rnl, rn, params, rng);
+    if (incoming == vec3f{0, 0, 0} || !isfinite(incoming)) break;
+    auto pdf     = sample_bsdfcos_pdf(point, outgoing, incoming);
+    auto bsdfcos = eval_bsdfcos(point, outgoing, incoming);
+    if (!(pdf > 0) || bsdfcos == vec3f{0, 0, 0}) break;
+    weight *= bsdfcos / pdf;
+    bsdf_pdf = pdf;
+    if (!isfinite(weight)) break;
+
+    // Russian roulette after a few bounces (unbiased).
+    if (bounce >= 3) {
+      auto survive = std::min(0.95f, max_component(weight));
+      if (rand1f(rng) >= survive) break;
+      weight /= survive;
+    }
+    ray = spawn_ray(point, incoming);
+  }
+  return radiance;
+}
+
+}  // namespace yocto
+
+// -----------------------------------------------------------------------------
+// IMAGE RENDERING
+// -----------------------------------------------------------------------------
+namespace yocto {
+
+bool check_trace_params(const scene_data& scene, const trace_params& params,
+    std::string& error) {
+  if (scene.cameras.empty()) return error = "the scene has no camera", false;
+  if (params.camera < 0 || params.camera >= (int)scene.cameras.size())
+    return error = "camera " + std::to_string(params.camera) + " out of range", false;
+  if (params.resolution < 1 || params.resolution > 65536)
+    return error = "resolution must be in [1, 65536]", false;
+  if (params.samples < 1) return error = "samples must be at least 1", false;
+  if (params.bounces < 1) return error = "bounces must be at least 1", false;
+  if (!(params.clamp >= 0)) return error = "clamp must be 0 (none) or positive", false;
+  if (params.threads < 0) return error = "threads must be 0 (all) or positive", false;
+  return true;
+}
+
+void init_trace_state(trace_state& state, const scene_data& scene, const trace_params& params) {
+  auto size     = camera_resolution(scene.cameras[params.camera], params.resolution);
+  state.width   = size.x;
+  state.height  = size.y;
+  state.samples = 0;
+  state.sums.assign((size_t)size.x * size.y, glm::dvec3{0, 0, 0});
+  state.rays      = 0;
+  state.nonfinite = 0;
+}
+
+// Random numbers of one pixel sample: a stream per (seed, pixel, sample).
+static rng_state make_pixel_rng(uint64_t seed, int pixel, int sample) {
+  auto key = hash_uint64(seed) ^ hash_uint64(((uint64_t)pixel << 24) ^ (uint64_t)sample);
+  return make_rng(hash_uint64(key), (uint64_t)pixel);
+}
+
+void trace_samples(trace_state& state, const scene_data& scene, const scene_bvh& bvh,
+    const trace_lights& lights, const trace_params& params, int count) {
+  auto& camera = scene.cameras[params.camera];
+  auto  render_row = [&](int j) {
+    auto rays = (int64_t)0, nonfinite = (int64_t)0;
+    for (auto i = 0; i < state.width; i++) {
+      auto pixel = j * state.width + i;
+      auto sum   = glm::dvec3{0, 0, 0};
+      for (auto s = state.samples; s < state.samples + count; s++) {
+        auto rng      = make_pixel_rng(params.seed, pixel, s);
+        auto puv      = rand2f(rng);
+        auto luv      = rand2f(rng);
+        auto uv       = vec2f{(i + puv.x) / state.width, (j + puv.y) / state.height};
+        auto ray      = eval_camera(camera, uv, luv);
+        auto radiance = trace_radiance(scene, bvh, lights, ray, rng, params, rays);
+        if (!isfinite(radiance)) {
+          nonfinite++;
+          continue;
+        }
+        if (params.clamp > 0 && max_component(radiance) > params.clamp)
+          radiance *= params.clamp / max_component(radiance);
+        sum += glm::dvec3(radiance);
+      }
+      state.sums[pixel] += sum;
+    }
+    state.rays += rays;
+    state.nonfinite += nonfinite;
+  };
+  auto threads = params.threads > 0 ? params.threads : tbb::task_arena::automatic;
+  auto arena   = tbb::task_arena(threads);
+  arena.execute([&] {
+    tbb::parallel_for(tbb::blocked_range<int>(0, state.height, 1),
+        [&](const tbb::blocked_range<int>& range) {
+          for (auto j = range.begin(); j < range.end(); j++) render_row(j);
+        });
+  });
+  state.samples += count;
+}
+
+texture_data get_image(const trace_state& state) {
+  auto image   = texture_data{state.width, state.height, {}};
+  auto scale   = state.samples > 0 ? 1.0 / state.samples : 0.0;
+  image.pixels.resize(state.sums.size());
+  for (auto i = 0; i < (int)state.sums.size(); i++)
+    image.pixels[i] = vec3f(state.sums[i] * scale);
+  return image;
+}
+
+}  // namespace yocto

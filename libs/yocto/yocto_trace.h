@@ -1,0 +1,105 @@
+//
+// # Yocto/Trace: a path tracer for hair scenes
+//
+// `path` samples the BSDF and, at every bounce, one light (environment, area
+// light or distant light) with a shadow ray, combining the two with multiple
+// importance sampling (power heuristic); `naive` samples the BSDF only. Hair
+// is shaded with Yocto/Hair at line and curve hits. Each pixel sample's random
+// numbers depend only on (seed, pixel, sample index), so images do not depend
+// on the number of threads.
+//
+
+#ifndef YOCTO_TRACE_H_
+#define YOCTO_TRACE_H_
+
+#include <array>
+#include <atomic>
+#include <string>
+#include <vector>
+
+#include "yocto_bvh.h"
+#include "yocto_sampling.h"
+#include "yocto_scene.h"
+
+// -----------------------------------------------------------------------------
+// PARAMETERS
+// -----------------------------------------------------------------------------
+namespace yocto {
+
+enum struct trace_sampler_type { path, naive };
+inline const auto trace_sampler_names = std::array<std::string, 2>{"path", "naive"};
+
+struct trace_params {
+  int                camera     = 0;
+  int                resolution = 720;  // largest image side
+  trace_sampler_type sampler    = trace_sampler_type::path;
+  int                samples    = 64;
+  int                bounces    = 32;
+  float              clamp      = 100;   // max sample value, 0 for none
+  uint64_t           seed       = 961748941;
+  int                threads    = 0;     // 0 for all cores
+  bool               hair_four_numbers = false;  // 4 independent numbers, no demux
+};
+
+}  // namespace yocto
+
+// -----------------------------------------------------------------------------
+// LIGHTS
+// -----------------------------------------------------------------------------
+namespace yocto {
+
+// A light to sample: an emissive triangle instance (with a cdf over its
+// triangles' world areas), the environment (with a cdf over its texels,
+// weighted by sin(theta) and luminance) or a distant light.
+struct trace_light {
+  int                instance    = -1;
+  int                environment = -1;
+  int                distant     = -1;
+  std::vector<float> cdf         = {};
+};
+
+struct trace_lights {
+  std::vector<trace_light> lights = {};
+};
+
+trace_lights make_trace_lights(const scene_data& scene);
+
+}  // namespace yocto
+
+// -----------------------------------------------------------------------------
+// RENDERING
+// -----------------------------------------------------------------------------
+namespace yocto {
+
+// The image being rendered: sums of samples per pixel and counters.
+struct trace_state {
+  int                        width   = 0;
+  int                        height  = 0;
+  int                        samples = 0;  // samples per pixel done so far
+  std::vector<glm::dvec3>    sums    = {};
+  std::atomic<int64_t>       rays    = 0;  // rays cast (camera, bounce, shadow)
+  std::atomic<int64_t>       nonfinite = 0;  // samples dropped as NaN or Inf
+};
+
+// Checks the parameters against the scene; false with a message if wrong.
+bool check_trace_params(const scene_data& scene, const trace_params& params,
+    std::string& error);
+
+void init_trace_state(trace_state& state, const scene_data& scene, const trace_params& params);
+
+// Adds `count` samples to every pixel (samples state.samples ... + count - 1),
+// using params.threads threads.
+void trace_samples(trace_state& state, const scene_data& scene, const scene_bvh& bvh,
+    const trace_lights& lights, const trace_params& params, int count);
+
+// The current estimate: sums over samples.
+texture_data get_image(const trace_state& state);
+
+// Radiance of one path from a camera ray (exposed for tests).
+vec3f trace_radiance(const scene_data& scene, const scene_bvh& bvh,
+    const trace_lights& lights, const ray3f& ray, rng_state& rng,
+    const trace_params& params, int64_t& rays);
+
+}  // namespace yocto
+
+#endif

@@ -1,0 +1,249 @@
+//
+// Tests of the math and sampling helpers, cameras, and fiber hits through the
+// real Embree intersection path.
+//
+
+#include <gtest/gtest.h>
+#include <yocto/yocto_bvh.h>
+#include <yocto/yocto_sampling.h>
+#include <yocto/yocto_scene.h>
+
+#include <cmath>
+
+using namespace yocto;
+
+// -----------------------------------------------------------------------------
+// MATH AND SAMPLING
+// -----------------------------------------------------------------------------
+
+TEST(math, frame_inverse_and_composition) {
+  auto frame = rotation_frame({1, 2, 3}, 0.7f) * translation_frame({1, -2, 5}) *
+               scaling_frame({2, 2, 2});
+  auto p     = vec3f{0.3f, -1.2f, 4.0f};
+  auto q     = transform_point(inverse(frame), transform_point(frame, p));
+  EXPECT_NEAR(distance(p, q), 0, 1e-5f);
+  EXPECT_NEAR(frame_scale(frame), 2, 1e-5f);
+  auto rigid = rotation_frame({0, 1, 0}, 1.1f) * translation_frame({3, 0, 0});
+  auto r     = transform_point(inverse(rigid, false), transform_point(rigid, p));
+  EXPECT_NEAR(distance(p, r), 0, 1e-5f);
+}
+
+TEST(math, lookat_frame_points_minus_z_at_target) {
+  auto frame = lookat_frame({1, 2, 3}, {4, 2, 3}, {0, 1, 0});
+  EXPECT_NEAR(dot(-frame.z, vec3f{1, 0, 0}), 1, 1e-6f);
+  EXPECT_NEAR(dot(frame.y, vec3f{0, 1, 0}), 1, 1e-6f);
+  EXPECT_NEAR(dot(cross(frame.x, frame.y), frame.z), 1, 1e-6f);
+}
+
+TEST(math, basis_fromz_is_orthonormal) {
+  auto rng = make_rng(7);
+  for (auto i = 0; i < 1000; i++) {
+    auto z = sample_sphere(rand2f(rng));
+    auto b = basis_fromz(z);
+    EXPECT_NEAR(dot(b[0], b[1]), 0, 1e-5f);
+    EXPECT_NEAR(dot(b[0], b[2]), 0, 1e-5f);
+    EXPECT_NEAR(length(b[0]), 1, 1e-5f);
+    EXPECT_NEAR(length(b[1]), 1, 1e-5f);
+    EXPECT_NEAR(dot(cross(b[0], b[1]), b[2]), 1, 1e-5f);
+  }
+}
+
+TEST(sampling, rand1f_is_in_unit_interval_and_uniform) {
+  // 1e6 numbers in 10 bins: each bin within 1% of 1e5 (about 3 sigma).
+  auto rng  = make_rng(1234);
+  auto bins = std::vector<int>(10, 0);
+  for (auto i = 0; i < 1000000; i++) {
+    auto r = rand1f(rng);
+    ASSERT_GE(r, 0.0f);
+    ASSERT_LT(r, 1.0f);
+    bins[(int)(r * 10)]++;
+  }
+  for (auto count : bins) EXPECT_NEAR(count, 100000, 1000);
+}
+
+TEST(sampling, generators_are_repeatable_and_streams_differ) {
+  auto a = make_rng(42, 1), b = make_rng(42, 1), c = make_rng(42, 2);
+  auto same = true, different = false;
+  for (auto i = 0; i < 100; i++) {
+    auto x = advance_rng(a), y = advance_rng(b), z = advance_rng(c);
+    same      = same && x == y;
+    different = different || x != z;
+  }
+  EXPECT_TRUE(same);
+  EXPECT_TRUE(different);
+}
+
+TEST(sampling, cosine_hemisphere_matches_its_pdf) {
+  // Monte Carlo estimate of the integral of cos^2 over the hemisphere (2pi/3)
+  // with cosine sampling: 200k samples, tolerance 0.5%.
+  auto rng = make_rng(99);
+  auto n   = vec3f{0.3f, -0.5f, 0.8f};
+  n        = normalize(n);
+  auto sum = 0.0;
+  auto count = 200000;
+  for (auto i = 0; i < count; i++) {
+    auto w   = sample_hemisphere_cos(n, rand2f(rng));
+    auto pdf = sample_hemisphere_cos_pdf(n, w);
+    ASSERT_GT(pdf, 0);
+    sum += sqr(dot(n, w)) / pdf;
+  }
+  EXPECT_NEAR(sum / count, 2 * pif / 3, 0.005 * 2 * pif / 3);
+}
+
+TEST(sampling, discrete_distribution) {
+  auto cdf = std::vector<float>{1, 1, 4, 10};  // weights 1, 0, 3, 6
+  EXPECT_EQ(sample_discrete(cdf, 0.05f), 0);
+  EXPECT_EQ(sample_discrete(cdf, 0.2f), 2);
+  EXPECT_EQ(sample_discrete(cdf, 0.99f), 3);
+  EXPECT_FLOAT_EQ(sample_discrete_pdf(cdf, 1), 0);
+  EXPECT_FLOAT_EQ(sample_discrete_pdf(cdf, 2), 0.3f);
+}
+
+TEST(camera, center_ray_looks_down_minus_z_and_corners_match_the_field_of_view) {
+  auto camera   = camera_data{};
+  camera.frame  = lookat_frame({0, 0, 5}, {0, 0, 0}, {0, 1, 0});
+  camera.aspect = 2;
+  auto center   = eval_camera(camera, {0.5f, 0.5f}, {0, 0});
+  EXPECT_NEAR(dot(center.d, vec3f{0, 0, -1}), 1, 1e-6f);
+  // Right edge of the image: half the film width over the lens.
+  auto right = eval_camera(camera, {1.0f, 0.5f}, {0, 0});
+  EXPECT_NEAR(right.d.x / -right.d.z, camera.film / 2 / camera.lens, 1e-5f);
+  // Top edge (v = 0) looks up.
+  auto top = eval_camera(camera, {0.5f, 0.0f}, {0, 0});
+  EXPECT_NEAR(top.d.y / -top.d.z, camera.film / camera.aspect / 2 / camera.lens, 1e-5f);
+  EXPECT_EQ(camera_resolution(camera, 640), (vec2i{640, 320}));
+}
+
+// -----------------------------------------------------------------------------
+// FIBER HITS THROUGH EMBREE
+// -----------------------------------------------------------------------------
+
+// A straight fiber along x through the origin, radius r, as one shape of the
+// given kind, placed by an instance frame.
+static scene_data make_straight_fiber_scene(bool curves, float radius, const frame3f& frame) {
+  auto scene = scene_data{};
+  auto shape = shape_data{};
+  if (curves) {
+    shape.positions = {{-2, 0, 0}, {-2.0f / 3, 0, 0}, {2.0f / 3, 0, 0}, {2, 0, 0}};
+    shape.curves    = {{0, 1, 2, 3}};
+  } else {
+    shape.positions = {{-2, 0, 0}, {0, 0, 0}, {2, 0, 0}};
+    shape.lines     = {{0, 1}, {1, 2}};
+  }
+  shape.radius.assign(shape.positions.size(), radius);
+  scene.shapes.push_back(shape);
+  scene.materials.push_back({});
+  scene.instances.push_back({frame, 0, 0});
+  return scene;
+}
+
+// Shoots rays at known offsets across the fiber and checks h (sign included),
+// tangent, radius, and that the frame is right-handed with z facing the ray.
+static void check_fiber_offsets(bool curves, bool flat) {
+  auto radius = 0.1f;
+  // Instance frame: rotated and translated so that nothing is axis-aligned.
+  auto frame = translation_frame({0.5f, 1, -2}) * rotation_frame({0.2f, 1, 0.3f}, 0.9f);
+  auto scene = make_straight_fiber_scene(curves, radius, frame);
+  auto bvh   = scene_bvh{};
+  auto error = std::string{};
+  ASSERT_TRUE(make_scene_bvh(bvh, scene, {flat, false}, error)) << error;
+  auto axis_x = transform_direction(frame, {1, 0, 0});
+  // View along world-space -z of the fiber's local frame, tilted a bit along
+  // the fiber so that the ray is not perpendicular to it.
+  auto local_dir = normalize(vec3f{0.3f, 0, -1});
+  for (auto h : {-0.9f, -0.5f, -0.1f, 0.0f, 0.3f, 0.7f, 0.95f}) {
+    // In the fiber's local frame, y = z x x for z = +z (facing the ray
+    // origin) is +y: offset the ray along +y by h * radius.
+    auto local_origin = vec3f{0.1f, h * radius, 5} - local_dir * 0.0f;
+    auto ray = ray3f{transform_point(frame, local_origin - local_dir * 0.0f),
+        transform_direction(frame, local_dir)};
+    auto hit = intersect_scene_bvh(bvh, ray);
+    ASSERT_TRUE(hit.hit) << "h = " << h;
+    auto fiber = eval_fiber_point(
+        scene, scene.instances[hit.instance], hit.element, hit.uv.x, ray, hit.distance);
+    EXPECT_NEAR(fiber.h, h, 2e-3f) << "h = " << h << (curves ? " curves" : " lines")
+                                   << (flat ? " flat" : " round");
+    EXPECT_NEAR(std::abs(dot(fiber.tangent, axis_x)), 1, 1e-4f);
+    EXPECT_NEAR(fiber.radius, radius, 1e-5f);
+    EXPECT_NEAR(dot(cross(fiber.frame.z, fiber.frame.x), fiber.frame.y), 1, 1e-4f);
+    EXPECT_GT(dot(fiber.frame.z, -ray.d), 0);
+    EXPECT_NEAR(dot(fiber.frame.z, fiber.frame.x), 0, 1e-5f);
+    // The hit point lies on the tube for round fibers.
+    if (!flat) {
+      auto to_hit = fiber.position - fiber.axis;
+      to_hit -= dot(to_hit, fiber.tangent) * fiber.tangent;
+      EXPECT_NEAR(length(to_hit), radius, 2e-3f);
+      // and the normal at h is the surface normal there.
+      EXPECT_NEAR(dot(normalize(to_hit), fiber.normal), 1, 1e-2f);
+    }
+  }
+}
+
+TEST(fiber, offset_h_of_round_lines) { check_fiber_offsets(false, false); }
+TEST(fiber, offset_h_of_round_curves) { check_fiber_offsets(true, false); }
+TEST(fiber, offset_h_of_flat_lines) { check_fiber_offsets(false, true); }
+TEST(fiber, offset_h_of_flat_curves) { check_fiber_offsets(true, true); }
+
+TEST(fiber, h_sign_follows_the_frame_y_axis) {
+  // Rays from +z hitting a fiber along +x: a hit above the axis (y > 0) has
+  // y axis = z x x = +y, so h > 0; below, h < 0. Viewed from -z, the frame's
+  // y axis flips to -y, and a hit at y > 0 gets h < 0.
+  auto scene = make_straight_fiber_scene(true, 0.2f, identity3x4f);
+  auto bvh   = scene_bvh{};
+  auto error = std::string{};
+  ASSERT_TRUE(make_scene_bvh(bvh, scene, {}, error)) << error;
+  auto shoot = [&](vec3f o, vec3f d) {
+    auto ray = ray3f{o, d};
+    auto hit = intersect_scene_bvh(bvh, ray);
+    EXPECT_TRUE(hit.hit);
+    return eval_fiber_point(scene, scene.instances[0], hit.element, hit.uv.x, ray, hit.distance);
+  };
+  auto above = shoot({0, 0.1f, 3}, {0, 0, -1});
+  EXPECT_NEAR(above.h, 0.5f, 1e-3f);
+  EXPECT_NEAR(dot(above.frame.y, vec3f{0, 1, 0}), 1, 1e-5f);
+  auto below = shoot({0, -0.1f, 3}, {0, 0, -1});
+  EXPECT_NEAR(below.h, -0.5f, 1e-3f);
+  auto behind = shoot({0, 0.1f, -3}, {0, 0, 1});
+  EXPECT_NEAR(behind.h, -0.5f, 1e-3f);
+  EXPECT_NEAR(dot(behind.frame.y, vec3f{0, -1, 0}), 1, 1e-5f);
+}
+
+TEST(fiber, curved_bezier_tangent_and_radius_taper) {
+  // A quarter-circle-like Bezier from (0,0,0) to (1,1,0) with radius 0.05
+  // tapering to 0.01: hit it from +z at the middle and check the tangent
+  // against the analytic derivative and the radius against the Bezier blend.
+  auto scene = scene_data{};
+  auto shape = shape_data{};
+  shape.positions = {{0, 0, 0}, {0.55f, 0, 0}, {1, 0.45f, 0}, {1, 1, 0}};
+  shape.radius    = {0.05f, 0.04f, 0.02f, 0.01f};
+  shape.curves    = {{0, 1, 2, 3}};
+  scene.shapes.push_back(shape);
+  scene.materials.push_back({});
+  scene.instances.push_back({identity3x4f, 0, 0});
+  auto bvh   = scene_bvh{};
+  auto error = std::string{};
+  ASSERT_TRUE(make_scene_bvh(bvh, scene, {}, error)) << error;
+  auto& p   = shape.positions;
+  auto  mid = eval_bezier(p[0], p[1], p[2], p[3], 0.5f);
+  auto  ray = ray3f{mid + vec3f{0, 0, 3}, {0, 0, -1}};
+  auto  hit = intersect_scene_bvh(bvh, ray);
+  ASSERT_TRUE(hit.hit);
+  auto fiber = eval_fiber_point(scene, scene.instances[0], hit.element, hit.uv.x, ray, hit.distance);
+  auto expected_tangent = normalize(eval_bezier_derivative(p[0], p[1], p[2], p[3], hit.uv.x));
+  EXPECT_NEAR(dot(fiber.tangent, expected_tangent), 1, 1e-5f);
+  EXPECT_NEAR(hit.uv.x, 0.5f, 0.05f);
+  EXPECT_NEAR(fiber.radius, eval_bezier(0.05f, 0.04f, 0.02f, 0.01f, hit.uv.x), 1e-6f);
+  EXPECT_NEAR(fiber.h, 0, 0.05f);
+}
+
+TEST(bvh, occlusion_and_misses) {
+  auto scene = make_straight_fiber_scene(false, 0.1f, identity3x4f);
+  auto bvh   = scene_bvh{};
+  auto error = std::string{};
+  ASSERT_TRUE(make_scene_bvh(bvh, scene, {}, error)) << error;
+  EXPECT_TRUE(intersect_scene_bvh_any(bvh, {{0, 0, 3}, {0, 0, -1}}));
+  EXPECT_FALSE(intersect_scene_bvh_any(bvh, {{0, 0.5f, 3}, {0, 0, -1}}));
+  EXPECT_FALSE(intersect_scene_bvh_any(bvh, {{0, 0, 3}, {0, 0, -1}, 0, 2.5f}));
+  EXPECT_FALSE(intersect_scene_bvh(bvh, {{0, 0, 3}, {0, 0, 1}}).hit);
+  EXPECT_GT(bvh.peak_memory, 0);
+}
