@@ -1,1 +1,431 @@
-// yocto_hair: implementation (in progress)
+//
+// Implementation of Yocto/Hair. Equations follow Pharr, The Implementation of
+// a Hair Scattering Model (2016), "hair.pdf" below; the longitudinal lobe is
+// d'Eon et al. 2011 (EGSR), its sampling d'Eon et al. 2013 (Importance
+// Sampling for Physically-Based Hair Fiber Models), the roughness maps and
+// colour inversion Chiang et al. 2016 (EGSR).
+//
+
+#include "yocto_hair.h"
+
+#include <cstdint>
+
+// -----------------------------------------------------------------------------
+// BUILDING BLOCKS
+// -----------------------------------------------------------------------------
+namespace yocto {
+
+// Giesen's "Compact1By1": keeps the even bits of x, packed into 16 bits.
+static uint32_t compact_1by1(uint32_t x) {
+  x &= 0x55555555u;
+  x = (x ^ (x >> 1)) & 0x33333333u;
+  x = (x ^ (x >> 2)) & 0x0f0f0f0fu;
+  x = (x ^ (x >> 4)) & 0x00ff00ffu;
+  x = (x ^ (x >> 8)) & 0x0000ffffu;
+  return x;
+}
+
+vec2f demux_hair_sample(float u) {
+  // u in [0, 1) scaled to 32 bits; clamped so that u = 1 or garbage cannot
+  // overflow the conversion.
+  auto scaled = (double)std::clamp(u, 0.0f, 1.0f) * 4294967296.0;
+  auto bits   = (uint32_t)std::min(scaled, 4294967295.0);
+  return {compact_1by1(bits) / 65536.0f, compact_1by1(bits >> 1) / 65536.0f};
+}
+
+float hair_bessel_i0e(float x_) {
+  // Computed in double, so that the float result is correctly rounded or
+  // nearly so. Below 12 the power series sum_k (x^2/4)^k / (k!)^2 (A&S 9.6.12)
+  // has positive terms; 22 terms leave a relative error under 1e-12 at x = 12.
+  // Above, the asymptotic expansion (A&S 9.7.1)
+  // I_0(x) e^-x sqrt(2 pi x) = sum_k ((2k-1)!!)^2 / (k! (8x)^k),
+  // whose terms keep shrinking until k ~ 2x; 14 terms leave < 1e-10 at x = 12.
+  auto x = std::abs((double)x_);
+  if (!(x < 1e30)) return 0;  // huge (I_0 e^-x -> 0) or NaN
+  if (x < 12) {
+    auto q = x * x / 4, term = 1.0, sum = 1.0;
+    for (auto k = 1; k <= 22; k++) {
+      term *= q / ((double)k * k);
+      sum += term;
+    }
+    return (float)(sum * std::exp(-x));
+  } else {
+    auto term = 1.0, sum = 1.0;
+    for (auto k = 1; k <= 14; k++) {
+      term *= (2.0 * k - 1) * (2.0 * k - 1) / (8.0 * k * x);
+      sum += term;
+    }
+    return (float)(sum / std::sqrt(2 * 3.14159265358979323846 * x));
+  }
+}
+
+// M_p with its material factor m_scale = 1 / (v (1 - e^{-2/v})) given.
+// d'Eon 2011 eq. 6: M = csch(1/v) / (2v) e^{-b} I_0(a), a = cos_i cos_o / v,
+// b = sin_i sin_o / v. With csch(1/v) = 2 e^{-1/v} / (1 - e^{-2/v}):
+// M = m_scale e^{a - b - 1/v} [I_0(a) e^{-a}], and a - b - 1/v cancels
+// analytically to -(1 - cos(theta_i + theta_o)) / v, which float keeps
+// accurate even at v = 5e-5 where a, b and 1/v are all ~2e4.
+static float eval_longitudinal(float v, float m_scale, float sin_i,
+    float cos_i, float sin_o, float cos_o) {
+  auto cos_sum = cos_i * cos_o - sin_i * sin_o;
+  auto sin_sum = sin_i * cos_o + cos_i * sin_o;
+  // 1 - cos(x) as sin^2(x) / (1 + cos(x)) near the peak, where the direct
+  // difference would cancel.
+  auto one_minus_cos = cos_sum > 0 ? sin_sum * sin_sum / (1 + cos_sum)
+                                   : 1 - cos_sum;
+  auto a = cos_i * cos_o / v;
+  return m_scale * std::exp(-one_minus_cos / v) * hair_bessel_i0e(a);
+}
+
+static float longitudinal_scale(float v) { return 1 / (v * -std::expm1(-2 / v)); }
+
+float eval_hair_longitudinal(float v, float sin_theta_i, float cos_theta_i,
+    float sin_theta_o, float cos_theta_o) {
+  if (!(v > 0)) return 0;
+  return eval_longitudinal(v, longitudinal_scale(v), sin_theta_i,
+      cos_theta_i, sin_theta_o, cos_theta_o);
+}
+
+}  // namespace yocto
+
+// -----------------------------------------------------------------------------
+// PIGMENTS AND MATERIAL TERMS
+// -----------------------------------------------------------------------------
+namespace yocto {
+
+vec3f hair_sigma_a_from_melanin(float eumelanin, float pheomelanin) {
+  // d'Eon et al. 2011, section 4: absorption per unit concentration.
+  auto eumelanin_sigma_a   = vec3f{0.419f, 0.697f, 1.37f};
+  auto pheomelanin_sigma_a = vec3f{0.187f, 0.4f, 1.05f};
+  return std::max(eumelanin, 0.0f) * eumelanin_sigma_a +
+         std::max(pheomelanin, 0.0f) * pheomelanin_sigma_a;
+}
+
+vec3f hair_sigma_a_from_color(const vec3f& color, float beta_n) {
+  // Chiang et al. 2016, eq. 9. Colour 0 would need infinite absorption.
+  auto b     = beta_n;
+  auto denom = 5.969f - 0.215f * b + 2.532f * sqr(b) - 10.73f * b * sqr(b) +
+               5.574f * sqr(sqr(b)) + 0.245f * b * sqr(sqr(b));
+  auto sigma_a = vec3f{0, 0, 0};
+  for (auto c = 0; c < 3; c++) {
+    sigma_a[c] = sqr(std::log(std::clamp(color[c], 1e-4f, 1.0f)) / denom);
+  }
+  return sigma_a;
+}
+
+hair_precomputed make_hair_precomputed(const hair_material& material) {
+  auto pre = hair_precomputed{};
+  // beta = 0 makes the variance 0 and every term NaN (pbrt-v3 issue #219).
+  auto beta_m = std::clamp(material.beta_m, 0.01f, 1.0f);
+  auto beta_n = std::clamp(material.beta_n, 0.01f, 1.0f);
+  if (!(beta_m == beta_m)) beta_m = 0.3f;
+  if (!(beta_n == beta_n)) beta_n = 0.3f;
+  pre.beta_m = beta_m;
+  pre.beta_n = beta_n;
+  pre.eta    = material.eta >= 1 ? material.eta : 1.0f;
+
+  // Precedence as pbrt: sigma_a, else colour, else melanin.
+  if (material.has_sigma_a) {
+    pre.sigma_a = glm::max(material.sigma_a, vec3f{0, 0, 0});
+  } else if (material.has_color) {
+    pre.sigma_a = hair_sigma_a_from_color(material.color, beta_n);
+  } else {
+    pre.sigma_a = hair_sigma_a_from_melanin(
+        material.eumelanin, material.pheomelanin);
+  }
+  if (!isfinite(pre.sigma_a)) pre.sigma_a = glm::min(pre.sigma_a, 1e30f);
+  if (!isfinite(pre.sigma_a)) pre.sigma_a = {0, 0, 0};  // NaN input
+
+  // hair.pdf eq. 4 (Chiang 2016 eq. 7): variance of the R lobe; TT is
+  // narrower, TRT and beyond wider.
+  auto v0 = sqr(0.726f * beta_m + 0.812f * sqr(beta_m) +
+                3.7f * std::pow(beta_m, 20.0f));
+  pre.v[0] = v0;
+  pre.v[1] = v0 / 4;
+  pre.v[2] = 4 * v0;
+  pre.v[3] = 4 * v0;
+  for (auto p = 0; p < 4; p++) {
+    pre.m_tail[p]  = -std::expm1(-2 / pre.v[p]);
+    pre.m_scale[p] = 1 / (pre.v[p] * pre.m_tail[p]);
+  }
+
+  // hair.pdf eq. 8 (Chiang 2016 eq. 8): logistic scale; 0.265 is the
+  // published constant.
+  pre.s = std::sqrt(pif / 8) * (0.265f * beta_n + 1.194f * sqr(beta_n) +
+                                   5.372f * std::pow(beta_n, 22.0f));
+  // Logistic CDF F(x) = 1 / (1 + e^{-x/s}); F(pi) - F(-pi) = tanh(pi / 2s).
+  pre.n_scale   = 1 / std::tanh(pif / (2 * pre.s));
+  pre.n_cdf_min = 1 / (1 + std::exp(pif / pre.s));
+
+  // Scale tilt: sines and cosines of alpha, 2 alpha and 4 alpha by the double
+  // angle formulas.
+  auto alpha           = radians(material.alpha == material.alpha ? material.alpha : 0);
+  pre.sin_2k_alpha[0] = std::sin(alpha);
+  pre.cos_2k_alpha[0] = std::cos(alpha);
+  for (auto k = 1; k < 3; k++) {
+    pre.sin_2k_alpha[k] = 2 * pre.cos_2k_alpha[k - 1] * pre.sin_2k_alpha[k - 1];
+    pre.cos_2k_alpha[k] = sqr(pre.cos_2k_alpha[k - 1]) -
+                          sqr(pre.sin_2k_alpha[k - 1]);
+  }
+  return pre;
+}
+
+hair_brdf eval_hair_brdf(const hair_material& material, float h, const frame3f& frame) {
+  return eval_hair_brdf(make_hair_precomputed(material), h, frame);
+}
+
+hair_brdf eval_hair_brdf(
+    const hair_precomputed& material, float h, const frame3f& frame) {
+  auto brdf     = hair_brdf{};
+  brdf.material = material;
+  brdf.h        = h == h ? std::clamp(h, -1.0f, 1.0f) : 0.0f;
+  brdf.gamma_o  = safe_asin(brdf.h);
+  brdf.cos_gamma_o = safe_sqrt(1 - sqr(brdf.h));
+  // Orthonormal frame: x the tangent, z the normal made orthogonal to x,
+  // y = z × x so that the sign of h matches the documented convention.
+  auto x = safe_normalize(frame.x);
+  auto z = safe_normalize(frame.z - dot(frame.z, x) * x);
+  if (x == vec3f{0, 0, 0} || z == vec3f{0, 0, 0}) {
+    auto basis = basis_fromz(x == vec3f{0, 0, 0} ? vec3f{1, 0, 0} : x);
+    x          = basis[2];
+    z          = basis[0];
+  }
+  brdf.x = x;
+  brdf.y = cross(z, x);
+  brdf.z = z;
+  return brdf;
+}
+
+}  // namespace yocto
+
+// -----------------------------------------------------------------------------
+// SCATTERING TERMS
+// -----------------------------------------------------------------------------
+namespace yocto {
+
+// A direction in the fiber frame: longitudinal angle (sin, cos >= 0) and
+// azimuth phi = atan2(z, y).
+struct hair_angles {
+  float sin_theta = 0, cos_theta = 1, phi = 0;
+};
+
+static hair_angles make_angles(const hair_brdf& brdf, const vec3f& w) {
+  auto wx = dot(w, brdf.x), wy = dot(w, brdf.y), wz = dot(w, brdf.z);
+  // cos(theta) from the normal-plane components stays accurate at grazing
+  // angles, where sqrt(1 - sin^2) would not.
+  auto angles      = hair_angles{};
+  angles.sin_theta = std::clamp(wx, -1.0f, 1.0f);
+  angles.cos_theta = std::min(std::sqrt(wy * wy + wz * wz), 1.0f);
+  angles.phi       = std::atan2(wz, wy);
+  return angles;
+}
+
+// Terms that depend on theta_o (and the hit): attenuations A_p, lobe pdfs
+// proportional to their luminance, azimuthal offsets Phi(p, h), and the
+// tilted sin/cos of theta_o for each longitudinal lobe.
+struct hair_lobes {
+  vec3f a[4]          = {};
+  float a_pdf[4]      = {0, 0, 0, 0};
+  float phi_shift[3]  = {0, 0, 0};
+  float sin_theta[4]  = {0, 0, 0, 0};
+  float cos_theta[4]  = {1, 1, 1, 1};
+};
+
+// Fresnel reflectance of a dielectric of relative index eta >= 1 seen from
+// outside, unpolarised.
+static float fresnel_dielectric(float eta, float cos_i) {
+  cos_i      = std::clamp(cos_i, 0.0f, 1.0f);
+  auto sin_t2 = (1 - sqr(cos_i)) / sqr(eta);
+  auto cos_t  = safe_sqrt(1 - sin_t2);
+  // Both denominators vanish only for eta = 1 at grazing incidence.
+  auto d_parallel      = eta * cos_i + cos_t;
+  auto d_perpendicular = cos_i + eta * cos_t;
+  if (!(d_parallel > 0) || !(d_perpendicular > 0)) return 1;
+  auto r_parallel      = (eta * cos_i - cos_t) / d_parallel;
+  auto r_perpendicular = (cos_i - eta * cos_t) / d_perpendicular;
+  return (sqr(r_parallel) + sqr(r_perpendicular)) / 2;
+}
+
+static hair_lobes make_lobes(const hair_brdf& brdf, const hair_angles& wo) {
+  auto& mat   = brdf.material;
+  auto  lobes = hair_lobes{};
+  auto  sin_o = wo.sin_theta, cos_o = wo.cos_theta;
+
+  // hair.pdf section "Absorption in the fiber": refracted angles. eta' is the
+  // modified index of the projected problem (Bravais); cos(theta_o) = 0 would
+  // divide by zero (MDL-SDK issue 6), and gives eta' -> inf, sin(gamma_t) = 0.
+  auto sin_theta_t = sin_o / mat.eta;
+  auto cos_theta_t = safe_sqrt(1 - sqr(sin_theta_t));
+  auto eta_p       = safe_sqrt(sqr(mat.eta) - sqr(sin_o)) / std::max(cos_o, 1e-30f);
+  auto sin_gamma_t = std::clamp(brdf.h / std::max(eta_p, 1.0f), -1.0f, 1.0f);
+  auto cos_gamma_t = safe_sqrt(1 - sqr(sin_gamma_t));
+  auto gamma_t     = std::asin(sin_gamma_t);
+
+  // Transmittance of one pass through the fiber: path length 2 cos(gamma_t)
+  // / cos(theta_t) in units of the radius. cos(theta_t) >= sqrt(1 - 1/eta^2)
+  // is 0 only for eta = 1; an unabsorbed path stays 1 there.
+  auto path = 2 * cos_gamma_t / std::max(cos_theta_t, 1e-6f);
+  auto t    = vec3f{std::exp(-mat.sigma_a.x * path),
+      std::exp(-mat.sigma_a.y * path), std::exp(-mat.sigma_a.z * path)};
+
+  // hair.pdf eq. 12-13: A_0 = f, A_1 = (1 - f)^2 T, A_p = A_{p-1} T f, and
+  // the geometric tail A_pmax = A_2 f T / (1 - f T).
+  auto f    = fresnel_dielectric(mat.eta, cos_o * brdf.cos_gamma_o);
+  lobes.a[0] = vec3f{f, f, f};
+  lobes.a[1] = sqr(1 - f) * t;
+  lobes.a[2] = lobes.a[1] * t * f;
+  // 1 - f T vanishes only for f = 1 and T = 1, where A_2 = 0 as well.
+  auto denom = glm::max(vec3f{1, 1, 1} - t * f, vec3f{1e-6f});
+  lobes.a[3] = lobes.a[2] * t * f / denom;
+
+  // Lobe choice proportional to luminance (hair.pdf "Sampling").
+  auto total = 0.0f;
+  for (auto p = 0; p < 4; p++) total += lobes.a_pdf[p] = luminance(lobes.a[p]);
+  if (total > 0) {
+    for (auto p = 0; p < 4; p++) lobes.a_pdf[p] /= total;
+  }
+
+  // hair.pdf eq. 10: Phi(p, h) = 2 p gamma_t - 2 gamma_o + p pi.
+  for (auto p = 0; p < 3; p++) {
+    lobes.phi_shift[p] = 2 * p * gamma_t - 2 * brdf.gamma_o + p * pif;
+  }
+
+  // Scale tilt on theta_o (pbrt-v3 after PR #256, pbrt-v4): R sees
+  // theta_o - 2 alpha, TT theta_o + alpha, TRT theta_o + 4 alpha; the p_max
+  // term is untilted. The rotated cosine is taken in absolute value.
+  auto& sin_a = mat.sin_2k_alpha;
+  auto& cos_a = mat.cos_2k_alpha;
+  lobes.sin_theta[0] = sin_o * cos_a[1] - cos_o * sin_a[1];
+  lobes.cos_theta[0] = cos_o * cos_a[1] + sin_o * sin_a[1];
+  lobes.sin_theta[1] = sin_o * cos_a[0] + cos_o * sin_a[0];
+  lobes.cos_theta[1] = cos_o * cos_a[0] - sin_o * sin_a[0];
+  lobes.sin_theta[2] = sin_o * cos_a[2] + cos_o * sin_a[2];
+  lobes.cos_theta[2] = cos_o * cos_a[2] - sin_o * sin_a[2];
+  lobes.sin_theta[3] = sin_o;
+  lobes.cos_theta[3] = cos_o;
+  for (auto p = 0; p < 4; p++) lobes.cos_theta[p] = std::abs(lobes.cos_theta[p]);
+  return lobes;
+}
+
+// Angle wrapped into [-pi, pi] without loops (a NaN stays a NaN, never hangs).
+static float wrap_angle(float x) {
+  auto wrapped = x - 2 * pif * std::round(x / (2 * pif));
+  return std::clamp(wrapped, -pif, pif);
+}
+
+// hair.pdf eq. 11: logistic distribution of scale s trimmed to [-pi, pi].
+// Written with |x| so that e^{-|x|/s} underflows to 0 instead of overflowing.
+static float eval_azimuthal(const hair_precomputed& mat, float x) {
+  auto e = std::exp(-std::abs(x) / mat.s);
+  return mat.n_scale * e / (mat.s * sqr(1 + e));
+}
+
+// Inverse CDF of the trimmed logistic: u in [0, 1) to x in [-pi, pi].
+static float sample_azimuthal(const hair_precomputed& mat, float u) {
+  auto y = u / mat.n_scale + mat.n_cdf_min;  // F(x) = y
+  if (!(y > 0)) return -pif;
+  if (!(y < 1)) return pif;
+  return std::clamp(-mat.s * std::log((1 - y) / y), -pif, pif);
+}
+
+}  // namespace yocto
+
+// -----------------------------------------------------------------------------
+// EVAL, SAMPLE AND PDF
+// -----------------------------------------------------------------------------
+namespace yocto {
+
+vec3f eval_hair_scattering(
+    const hair_brdf& brdf, const vec3f& outgoing, const vec3f& incoming) {
+  auto& mat   = brdf.material;
+  auto  wo    = make_angles(brdf, outgoing);
+  auto  wi    = make_angles(brdf, incoming);
+  auto  lobes = make_lobes(brdf, wo);
+  auto  phi   = wi.phi - wo.phi;
+
+  // hair.pdf eq. 3 is f = sum_p M_p A_p N_p / |cos theta_i|; the tracer
+  // needs f times the cosine, so the sum itself is returned.
+  auto sum = vec3f{0, 0, 0};
+  for (auto p = 0; p < 3; p++) {
+    auto m = eval_longitudinal(mat.v[p], mat.m_scale[p], wi.sin_theta,
+        wi.cos_theta, lobes.sin_theta[p], lobes.cos_theta[p]);
+    auto n = eval_azimuthal(mat, wrap_angle(phi - lobes.phi_shift[p]));
+    sum += m * n * lobes.a[p];
+  }
+  auto m = eval_longitudinal(mat.v[3], mat.m_scale[3], wi.sin_theta,
+      wi.cos_theta, lobes.sin_theta[3], lobes.cos_theta[3]);
+  sum += m / (2 * pif) * lobes.a[3];
+  return sum;
+}
+
+float sample_hair_scattering_pdf(
+    const hair_brdf& brdf, const vec3f& outgoing, const vec3f& incoming) {
+  auto& mat   = brdf.material;
+  auto  wo    = make_angles(brdf, outgoing);
+  auto  wi    = make_angles(brdf, incoming);
+  auto  lobes = make_lobes(brdf, wo);
+  auto  phi   = wi.phi - wo.phi;
+
+  // Same lobes as eval, weighted by the lobe choice instead of A_p.
+  auto pdf = 0.0f;
+  for (auto p = 0; p < 3; p++) {
+    if (lobes.a_pdf[p] == 0) continue;
+    auto m = eval_longitudinal(mat.v[p], mat.m_scale[p], wi.sin_theta,
+        wi.cos_theta, lobes.sin_theta[p], lobes.cos_theta[p]);
+    auto n = eval_azimuthal(mat, wrap_angle(phi - lobes.phi_shift[p]));
+    pdf += m * n * lobes.a_pdf[p];
+  }
+  if (lobes.a_pdf[3] != 0) {
+    auto m = eval_longitudinal(mat.v[3], mat.m_scale[3], wi.sin_theta,
+        wi.cos_theta, lobes.sin_theta[3], lobes.cos_theta[3]);
+    pdf += m / (2 * pif) * lobes.a_pdf[3];
+  }
+  return pdf;
+}
+
+vec3f sample_hair_scattering(
+    const hair_brdf& brdf, const vec3f& outgoing, const vec2f& rn) {
+  auto u0 = demux_hair_sample(rn.x), u1 = demux_hair_sample(rn.y);
+  return sample_hair_scattering(brdf, outgoing, vec4f{u0.x, u0.y, u1.x, u1.y});
+}
+
+vec3f sample_hair_scattering(
+    const hair_brdf& brdf, const vec3f& outgoing, const vec4f& rn) {
+  auto& mat   = brdf.material;
+  auto  wo    = make_angles(brdf, outgoing);
+  auto  lobes = make_lobes(brdf, wo);
+
+  // Lobe p with probability a_pdf[p].
+  auto p = 0, last = -1;
+  for (auto q = 0; q < 4; q++) {
+    if (lobes.a_pdf[q] > 0) last = q;
+  }
+  if (last < 0) return {0, 0, 0};
+  auto u = rn.x;
+  for (p = 0; p < last; p++) {
+    if (u < lobes.a_pdf[p]) break;
+    u -= lobes.a_pdf[p];
+  }
+
+  // d'Eon 2013: cos(theta) = 1 + v log(u + (1 - u) e^{-2/v}) around the
+  // (tilted) outgoing cone; written as t = 1 - cos(theta) with log1p so that
+  // sin(theta) = sqrt(t (2 - t)) keeps its digits at low roughness.
+  auto t = -mat.v[p] * std::log1p(-(1 - rn.z) * mat.m_tail[p]);
+  t      = std::clamp(t, 0.0f, 2.0f);  // u = 0 may round to log(0)
+  auto cos_theta   = 1 - t;
+  auto sin_theta   = safe_sqrt(t * (2 - t));
+  auto cos_phi     = std::cos(2 * pif * rn.w);
+  auto sin_theta_i = -cos_theta * lobes.sin_theta[p] +
+                     sin_theta * cos_phi * lobes.cos_theta[p];
+  sin_theta_i      = std::clamp(sin_theta_i, -1.0f, 1.0f);
+  auto cos_theta_i = safe_sqrt(1 - sqr(sin_theta_i));
+
+  // Azimuth: Phi(p, h) plus a trimmed logistic sample; uniform for p_max.
+  auto dphi = p < 3 ? lobes.phi_shift[p] + sample_azimuthal(mat, rn.y)
+                    : 2 * pif * rn.y;
+  auto phi_i = wo.phi + dphi;
+  return brdf.x * sin_theta_i + brdf.y * (cos_theta_i * std::cos(phi_i)) +
+         brdf.z * (cos_theta_i * std::sin(phi_i));
+}
+
+}  // namespace yocto

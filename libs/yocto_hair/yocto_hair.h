@@ -6,6 +6,19 @@
 // 2011) and Chiang et al., A Practical and Controllable Hair and Fur Model for
 // Production Path Tracing (EGSR 2016). Depends on the math header alone.
 //
+// Use: once per material, `make_hair_precomputed` (or let `eval_hair_brdf`
+// do it); once per hit, `eval_hair_brdf` with the fiber frame and the signed
+// offset h; then `eval_hair_scattering`, `sample_hair_scattering` and
+// `sample_hair_scattering_pdf` with world-space directions, both pointing away
+// from the fiber. `eval_hair_scattering` returns the BSDF times the cosine
+// (Yocto/GL's bsdfcos convention), so the path weight of a sampled direction
+// is eval / pdf.
+//
+// Frame convention: x = fiber tangent, z = shading normal facing the outgoing
+// direction, y = z × x. A ray arriving along -outgoing that passes the axis at
+// signed distance h·radius, measured along y, has offset h: for a hit point p
+// on a round fiber, h = dot(p - axis, y) / radius.
+//
 
 #ifndef YOCTO_HAIR_H_
 #define YOCTO_HAIR_H_
@@ -32,8 +45,95 @@ struct hair_material {
   bool  has_color   = false;
 };
 
-// Everything precomputed for one hit (filled by eval_hair_brdf).
-struct hair_brdf;
+// Everything that depends on the material alone; compute it once per material
+// (the renderer may cache it) and pass it to eval_hair_brdf for each hit.
+// Index p: 0 = R, 1 = TT, 2 = TRT, 3 = all higher orders (p_max).
+struct hair_precomputed {
+  vec3f sigma_a        = {0, 0, 0};  // absorption per unit radius
+  float eta            = 1.55f;      // clamped to at least 1
+  float beta_m         = 0.3f;       // clamped to [0.01, 1]
+  float beta_n         = 0.3f;       // clamped to [0.01, 1]
+  float v[4]           = {0, 0, 0, 0};  // longitudinal variances
+  float m_scale[4]     = {0, 0, 0, 0};  // 1 / (v (1 - e^(-2/v))), M_p's factor
+  float m_tail[4]      = {0, 0, 0, 0};  // 1 - e^(-2/v), for sampling M_p
+  float s              = 0;             // azimuthal logistic scale
+  float n_scale        = 1;  // 1 / (F(pi) - F(-pi)), trimmed logistic norm
+  float n_cdf_min      = 0;  // logistic F(-pi), for sampling N_p
+  float sin_2k_alpha[3] = {0, 0, 0};  // sin of alpha, 2 alpha, 4 alpha
+  float cos_2k_alpha[3] = {1, 1, 1};  // cos of alpha, 2 alpha, 4 alpha
+};
+
+// Everything precomputed for one hit: the material terms, the offset h and
+// the orthonormal fiber frame (x tangent, y = z × x, z normal).
+struct hair_brdf {
+  hair_precomputed material    = {};
+  float            h           = 0;  // signed offset in [-1, 1]
+  float            gamma_o     = 0;  // asin(h)
+  float            cos_gamma_o = 1;
+  vec3f            x           = {1, 0, 0};
+  vec3f            y           = {0, 1, 0};
+  vec3f            z           = {0, 0, 1};
+};
+
+// Material terms: clamped roughness, variances, logistic scale, tilt sines
+// and cosines, and sigma_a chosen by the precedence above.
+hair_precomputed make_hair_precomputed(const hair_material& material);
+
+// Per-hit terms. frame: x = fiber tangent, z = shading normal facing the
+// outgoing direction, o unused; z is orthogonalised against x and y is
+// rebuilt as z × x. h in [-1, 1] is the signed offset (clamped).
+hair_brdf eval_hair_brdf(const hair_material& material, float h, const frame3f& frame);
+hair_brdf eval_hair_brdf(
+    const hair_precomputed& material, float h, const frame3f& frame);
+
+// BSDF times cosine (Yocto's bsdfcos convention): sum over p of M_p A_p N_p.
+// World directions, both pointing away from the fiber.
+vec3f eval_hair_scattering(
+    const hair_brdf& brdf, const vec3f& outgoing, const vec3f& incoming);
+
+// Samples an incoming direction from two uniform numbers in [0, 1), each
+// split in two by demux_hair_sample. Returns {0, 0, 0} if the fiber neither
+// reflects nor transmits anything (then the pdf is 0 too).
+vec3f sample_hair_scattering(
+    const hair_brdf& brdf, const vec3f& outgoing, const vec2f& rn);
+// The same from four independent uniform numbers: lobe choice, azimuth,
+// longitudinal angle, rotation around the longitudinal cone.
+vec3f sample_hair_scattering(
+    const hair_brdf& brdf, const vec3f& outgoing, const vec4f& rn);
+
+// Solid-angle pdf of sample_hair_scattering.
+float sample_hair_scattering_pdf(
+    const hair_brdf& brdf, const vec3f& outgoing, const vec3f& incoming);
+
+// Absorption coefficient from eumelanin and pheomelanin concentrations
+// (d'Eon et al. 2011); negative concentrations count as 0.
+vec3f hair_sigma_a_from_melanin(float eumelanin, float pheomelanin);
+// Absorption coefficient giving roughly the color c after multiple
+// scattering (Chiang et al. 2016, section 4.2). c is clamped to [1e-4, 1].
+vec3f hair_sigma_a_from_color(const vec3f& color, float beta_n);
+
+}  // namespace yocto
+
+// -----------------------------------------------------------------------------
+// BUILDING BLOCKS (exposed for tests and tools)
+// -----------------------------------------------------------------------------
+namespace yocto {
+
+// Splits one uniform number into two by a Morton-curve demux: the number's 32
+// leading bits, even bits to the first value and odd bits to the second (16
+// bits each; F. Giesen, Decoding Morton Codes, 2009). Keeps stratification.
+vec2f demux_hair_sample(float u);
+
+// Exponentially scaled modified Bessel function I_0(x) e^(-x), x >= 0,
+// accurate to float precision for every x (series, then asymptotic
+// expansion). Bounded in (0, 1], so it never overflows.
+float hair_bessel_i0e(float x);
+
+// d'Eon's longitudinal lobe M_p for variance v (d'Eon et al. 2011, eq. 6),
+// with theta_o already tilted and cos_theta_o >= 0. Normalised so that its
+// integral times cos(theta_i) over theta_i in [-pi/2, pi/2] is 1.
+float eval_hair_longitudinal(float v, float sin_theta_i, float cos_theta_i,
+    float sin_theta_o, float cos_theta_o);
 
 }  // namespace yocto
 
