@@ -110,7 +110,7 @@ static int run_render(const render_options& options, trace_params params,
   auto bvh = scene_bvh{};
   if (!make_scene_bvh(bvh, scene, {options.flat_curves, false}, error))
     return print_error(options.scene + ": " + error);
-  auto lights = make_trace_lights(scene);
+  auto context = make_trace_context(scene);
   auto state  = trace_state{};
   init_trace_state(state, scene, params);
   if (!options.quiet)
@@ -124,7 +124,7 @@ static int run_render(const render_options& options, trace_params params,
   auto render_start   = std::chrono::steady_clock::now();
   auto last_progress  = -1.0;
   while (state.samples < params.samples && !interrupted) {
-    trace_samples(state, scene, bvh, lights, params, 1);
+    trace_samples(state, scene, bvh, context, params, 1);
     auto elapsed = seconds_since(render_start);
     if (!options.quiet && (elapsed - last_progress > 0.25 || state.samples == params.samples)) {
       last_progress = elapsed;

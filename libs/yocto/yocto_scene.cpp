@@ -322,3 +322,43 @@ fiber_point eval_fiber_point(const scene_data& scene, const instance_data& insta
 }
 
 }  // namespace yocto
+
+// -----------------------------------------------------------------------------
+// PROCEDURAL SHAPES
+// -----------------------------------------------------------------------------
+namespace yocto {
+
+shape_data make_sphere_shape(int steps, float radius) {
+  auto shape  = shape_data{};
+  auto nu     = std::max(steps, 3), nv = std::max(steps / 2, 2);
+  for (auto j = 0; j <= nv; j++) {
+    for (auto i = 0; i <= nu; i++) {
+      auto uv = vec2f{(float)i / nu, (float)j / nv};
+      auto n  = equirect_to_direction(uv);
+      shape.positions.push_back(n * radius);
+      shape.normals.push_back(n);
+      shape.texcoords.push_back(uv);
+    }
+  }
+  for (auto j = 0; j < nv; j++) {
+    for (auto i = 0; i < nu; i++) {
+      auto v00 = j * (nu + 1) + i, v10 = v00 + 1, v01 = v00 + nu + 1, v11 = v01 + 1;
+      // Counter-clockwise seen from outside, so geometric normals point out.
+      if (j > 0) shape.triangles.push_back({v00, v10, v01});
+      if (j < nv - 1) shape.triangles.push_back({v10, v11, v01});
+    }
+  }
+  return shape;
+}
+
+shape_data make_quad_shape(const vec2f& size) {
+  auto shape      = shape_data{};
+  auto h          = size / 2.0f;
+  shape.positions = {{-h.x, -h.y, 0}, {h.x, -h.y, 0}, {h.x, h.y, 0}, {-h.x, h.y, 0}};
+  shape.normals   = {{0, 0, 1}, {0, 0, 1}, {0, 0, 1}, {0, 0, 1}};
+  shape.texcoords = {{0, 0}, {1, 0}, {1, 1}, {0, 1}};
+  shape.triangles = {{0, 1, 2}, {0, 2, 3}};
+  return shape;
+}
+
+}  // namespace yocto

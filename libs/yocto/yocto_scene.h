@@ -199,6 +199,11 @@ struct fiber_point {
 fiber_point eval_fiber_point(const scene_data& scene, const instance_data& instance,
     int element, float u, const ray3f& ray, float distance);
 
+// Procedural shapes: a UV sphere (steps along the equator, steps/2 rings)
+// with normals, and a quad of the given size in the xy plane facing +z.
+shape_data make_sphere_shape(int steps, float radius);
+shape_data make_quad_shape(const vec2f& size);
+
 // Checks references and sizes; returns false with a message naming the element.
 bool validate_scene(const scene_data& scene, std::string& error);
 

@@ -122,8 +122,10 @@ static vec3f sample_bsdfcos(const trace_point& point, const vec3f& outgoing, flo
 // -----------------------------------------------------------------------------
 namespace yocto {
 
-trace_lights make_trace_lights(const scene_data& scene) {
-  auto lights = trace_lights{};
+trace_context make_trace_context(const scene_data& scene) {
+  auto context = trace_context{};
+  for (auto& material : scene.materials)
+    context.hair.push_back(make_hair_precomputed(material.hair));
   for (auto i = 0; i < (int)scene.instances.size(); i++) {
     auto& instance = scene.instances[i];
     auto& material = scene.materials[instance.material];
@@ -139,7 +141,7 @@ trace_lights make_trace_lights(const scene_data& scene) {
       total += length(cross(p1 - p0, p2 - p0)) / 2;
       light.cdf.push_back(total);
     }
-    if (total > 0) lights.lights.push_back(light);
+    if (total > 0) context.lights.push_back(light);
   }
   for (auto i = 0; i < (int)scene.environments.size(); i++) {
     auto& environment = scene.environments[i];
@@ -159,15 +161,15 @@ trace_lights make_trace_lights(const scene_data& scene) {
       }
       if (total <= 0) continue;
     }
-    lights.lights.push_back(light);
+    context.lights.push_back(light);
   }
   for (auto i = 0; i < (int)scene.distant_lights.size(); i++) {
     if (scene.distant_lights[i].emission == vec3f{0, 0, 0}) continue;
     auto light    = trace_light{};
     light.distant = i;
-    lights.lights.push_back(light);
+    context.lights.push_back(light);
   }
-  return lights;
+  return context;
 }
 
 // Direction pdf (solid angle) of sampling the environment texture.
@@ -186,7 +188,7 @@ static float environment_texture_pdf(const scene_data& scene, const trace_light&
 }
 
 // Samples a direction towards a light from a point; returns the direction and
-// sets distance (flt_max for environments and distant lights).
+// (a zero vector if the light has no area).
 static vec3f sample_light(const scene_data& scene, const trace_light& light,
     const vec3f& position, float rel, const vec2f& ruv) {
   if (light.instance >= 0) {
@@ -225,7 +227,7 @@ static vec3f eval_environments(const scene_data& scene, const vec3f& direction) 
   return radiance;
 }
 
-static trace_point eval_trace_point(const scene_data& scene,
+static trace_point eval_trace_point(const scene_data& scene, const trace_context& context,
     const scene_intersection& intersection, const ray3f& ray) {
   auto& instance = scene.instances[intersection.instance];
   auto& material = scene.materials[instance.material];
@@ -254,7 +256,7 @@ static trace_point eval_trace_point(const scene_data& scene,
     point.tangent  = fiber.tangent;
     point.normal   = fiber.normal;
     if (material.type == material_type::hair) {
-      point.hair = eval_hair_brdf(material.hair, fiber.h, fiber.frame);
+      point.hair = eval_hair_brdf(context.hair[instance.material], fiber.h, fiber.frame);
     }
   }
   if (material.color_tex >= 0)
@@ -287,30 +289,30 @@ static float power_heuristic(float pdf_a, float pdf_b) {
 
 // Solid-angle pdf that light sampling would have produced for a BSDF ray that
 // hit an area light (at distance, with cosine at the light) or escaped.
-static float area_light_pdf(const scene_data& scene, const trace_lights& lights,
+static float area_light_pdf(const scene_data& scene, const trace_context& context,
     int instance, float distance, float cos_light) {
-  for (auto& light : lights.lights) {
+  for (auto& light : context.lights) {
     if (light.instance != instance) continue;
     if (cos_light <= 0) return 0;
     auto area = light.cdf.back();
-    return distance * distance / (cos_light * area) / lights.lights.size();
+    return distance * distance / (cos_light * area) / context.lights.size();
   }
   return 0;
 }
-static float environment_light_pdf(const scene_data& scene, const trace_lights& lights,
+static float environment_light_pdf(const scene_data& scene, const trace_context& context,
     const vec3f& direction) {
   auto pdf = 0.0f;
-  for (auto& light : lights.lights) {
+  for (auto& light : context.lights) {
     if (light.environment < 0) continue;
     pdf += scene.environments[light.environment].emission_tex >= 0
                ? environment_texture_pdf(scene, light, direction)
                : 1 / (4 * pif);
   }
-  return pdf / std::max((int)lights.lights.size(), 1);
+  return pdf / std::max((int)context.lights.size(), 1);
 }
 
 vec3f trace_radiance(const scene_data& scene, const scene_bvh& bvh,
-    const trace_lights& lights, const ray3f& camera_ray, rng_state& rng,
+    const trace_context& context, const ray3f& camera_ray, rng_state& rng,
     const trace_params& params, int64_t& rays) {
   auto radiance  = vec3f{0, 0, 0};
   auto weight    = vec3f{1, 1, 1};
@@ -324,20 +326,20 @@ vec3f trace_radiance(const scene_data& scene, const scene_bvh& bvh,
       auto emission = eval_environments(scene, ray.d);
       if (emission != vec3f{0, 0, 0}) {
         auto mis = use_mis && bsdf_pdf > 0
-                       ? power_heuristic(bsdf_pdf, environment_light_pdf(scene, lights, ray.d))
+                       ? power_heuristic(bsdf_pdf, environment_light_pdf(scene, context, ray.d))
                        : 1.0f;
         radiance += weight * emission * mis;
       }
       break;
     }
-    auto point    = eval_trace_point(scene, intersection, ray);
+    auto point    = eval_trace_point(scene, context, intersection, ray);
     auto outgoing = -ray.d;
     if (point.emission != vec3f{0, 0, 0}) {
       auto mis = 1.0f;
       if (use_mis && bsdf_pdf > 0) {
         auto surface = eval_surface_point(scene, scene.instances[intersection.instance],
             intersection.element, intersection.uv);
-        auto light_pdf = area_light_pdf(scene, lights, intersection.instance,
+        auto light_pdf = area_light_pdf(scene, context, intersection.instance,
             intersection.distance, std::abs(dot(surface.gnormal, outgoing)));
         mis = power_heuristic(bsdf_pdf, light_pdf);
       }
@@ -346,9 +348,9 @@ vec3f trace_radiance(const scene_data& scene, const scene_bvh& bvh,
     if (is_delta_free_black(point)) break;
 
     // Next-event estimation: one light, one shadow ray.
-    if (use_mis && !lights.lights.empty()) {
-      auto  nlights  = (int)lights.lights.size();
-      auto& light    = lights.lights[std::min(rand1i(rng, nlights), nlights - 1)];
+    if (use_mis && !context.lights.empty()) {
+      auto  nlights  = (int)context.lights.size();
+      auto& light    = context.lights[std::min(rand1i(rng, nlights), nlights - 1)];
       auto  rel      = rand1f(rng);
       auto  ruv      = rand2f(rng);
       auto  incoming = sample_light(scene, light, point.position, rel, ruv);
@@ -362,11 +364,11 @@ vec3f trace_radiance(const scene_data& scene, const scene_bvh& bvh,
         if (light.instance >= 0) {
           auto hit = intersect_scene_bvh(bvh, shadow);
           if (hit.hit && hit.instance == light.instance) {
-            auto lpoint = eval_trace_point(scene, hit, shadow);
+            auto lpoint = eval_trace_point(scene, context, hit, shadow);
             auto surface = eval_surface_point(
                 scene, scene.instances[hit.instance], hit.element, hit.uv);
             emission = lpoint.emission;
-            pdf = area_light_pdf(scene, lights, hit.instance, hit.distance,
+            pdf = area_light_pdf(scene, context, hit.instance, hit.distance,
                 std::abs(dot(surface.gnormal, incoming)));
           }
         } else if (!intersect_scene_bvh_any(bvh, shadow)) {
@@ -451,7 +453,7 @@ static rng_state make_pixel_rng(uint64_t seed, int pixel, int sample) {
 }
 
 void trace_samples(trace_state& state, const scene_data& scene, const scene_bvh& bvh,
-    const trace_lights& lights, const trace_params& params, int count) {
+    const trace_context& context, const trace_params& params, int count) {
   auto& camera = scene.cameras[params.camera];
   auto  render_row = [&](int j) {
     auto rays = (int64_t)0, nonfinite = (int64_t)0;
@@ -464,7 +466,7 @@ void trace_samples(trace_state& state, const scene_data& scene, const scene_bvh&
         auto luv      = rand2f(rng);
         auto uv       = vec2f{(i + puv.x) / state.width, (j + puv.y) / state.height};
         auto ray      = eval_camera(camera, uv, luv);
-        auto radiance = trace_radiance(scene, bvh, lights, ray, rng, params, rays);
+        auto radiance = trace_radiance(scene, bvh, context, ray, rng, params, rays);
         if (!isfinite(radiance)) {
           nonfinite++;
           continue;

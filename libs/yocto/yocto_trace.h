@@ -58,11 +58,14 @@ struct trace_light {
   std::vector<float> cdf         = {};
 };
 
-struct trace_lights {
-  std::vector<trace_light> lights = {};
+// What the tracer precomputes once per scene: the lights to sample and the
+// hair terms that depend on the material alone (one per material).
+struct trace_context {
+  std::vector<trace_light>      lights = {};
+  std::vector<hair_precomputed> hair   = {};
 };
 
-trace_lights make_trace_lights(const scene_data& scene);
+trace_context make_trace_context(const scene_data& scene);
 
 }  // namespace yocto
 
@@ -90,14 +93,14 @@ void init_trace_state(trace_state& state, const scene_data& scene, const trace_p
 // Adds `count` samples to every pixel (samples state.samples ... + count - 1),
 // using params.threads threads.
 void trace_samples(trace_state& state, const scene_data& scene, const scene_bvh& bvh,
-    const trace_lights& lights, const trace_params& params, int count);
+    const trace_context& context, const trace_params& params, int count);
 
 // The current estimate: sums over samples.
 texture_data get_image(const trace_state& state);
 
 // Radiance of one path from a camera ray (exposed for tests).
 vec3f trace_radiance(const scene_data& scene, const scene_bvh& bvh,
-    const trace_lights& lights, const ray3f& ray, rng_state& rng,
+    const trace_context& context, const ray3f& ray, rng_state& rng,
     const trace_params& params, int64_t& rays);
 
 }  // namespace yocto
