@@ -1,1 +1,1764 @@
-// yocto_sceneio: implementation (in progress)
+//
+// Implementation of Yocto/SceneIO: see yocto_sceneio.h.
+//
+
+#include "yocto_sceneio.h"
+
+#include <OpenImageIO/imageio.h>
+#include <unistd.h>
+
+#include <atomic>
+#include <cctype>
+#include <cerrno>
+#include <charconv>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <iostream>
+#include <nlohmann/json.hpp>
+#include <string_view>
+#include <unordered_map>
+#include <unordered_set>
+
+// -----------------------------------------------------------------------------
+// FILE HELPERS
+// -----------------------------------------------------------------------------
+namespace yocto {
+
+std::string path_dirname(const std::string& filename) {
+  auto slash = filename.find_last_of("/\\");
+  return slash == std::string::npos ? std::string{} : filename.substr(0, slash + 1);
+}
+
+std::string path_extension(const std::string& filename) {
+  auto slash = filename.find_last_of("/\\");
+  auto dot   = filename.find_last_of('.');
+  if (dot == std::string::npos || (slash != std::string::npos && dot < slash))
+    return "";
+  auto extension = filename.substr(dot);
+  for (auto& c : extension) c = (char)std::tolower((unsigned char)c);
+  return extension;
+}
+
+std::string path_join(const std::string& directory, const std::string& filename) {
+  if (directory.empty() || (!filename.empty() && filename.front() == '/')) return filename;
+  if (filename.empty()) return directory;
+  if (directory.back() == '/' || directory.back() == '\\') return directory + filename;
+  return directory + "/" + filename;
+}
+
+std::string make_temporary_filename(const std::string& filename) {
+  // The pid keeps processes apart, the counter keeps threads and repeated
+  // saves apart; the extension stays last because OpenImageIO picks the
+  // format from it.
+  static auto counter   = std::atomic<int>{0};
+  auto        directory = path_dirname(filename);
+  auto        base      = filename.substr(directory.size());
+  auto        dot       = base.find_last_of('.');
+  auto        stem = dot == std::string::npos || dot == 0 ? base : base.substr(0, dot);
+  auto        extension = stem.size() == base.size() ? std::string{} : base.substr(dot);
+  return directory + stem + ".tmp-" + std::to_string((long)getpid()) + "-" +
+         std::to_string(counter++) + extension;
+}
+
+// Reads a whole file in one go: PLY files with millions of curves are parsed
+// from memory, never value by value through a stream.
+static bool load_binary(const std::string& filename, std::string& data, std::string& error) {
+  auto ec = std::error_code{};
+  if (std::filesystem::is_directory(filename, ec)) {
+    error = filename + ": is a directory, not a file";
+    return false;
+  }
+  auto file = std::fopen(filename.c_str(), "rb");
+  if (!file) {
+    error = filename + ": cannot open file (" + std::strerror(errno) + ")";
+    return false;
+  }
+  data.clear();
+  if (std::fseek(file, 0, SEEK_END) == 0) {
+    auto size = std::ftell(file);
+    if (size > 0) data.reserve((size_t)size);
+    std::fseek(file, 0, SEEK_SET);
+  }
+  char buffer[1 << 16];
+  while (true) {
+    auto count = std::fread(buffer, 1, sizeof(buffer), file);
+    data.append(buffer, count);
+    if (count < sizeof(buffer)) break;
+  }
+  auto failed = std::ferror(file) != 0;
+  std::fclose(file);
+  if (failed) {
+    error = filename + ": cannot read file";
+    return false;
+  }
+  return true;
+}
+
+// Writes data to a temporary name next to filename, then renames it; the
+// temporary file never survives a failure.
+static bool save_binary(
+    const std::string& filename, const std::string& data, std::string& error) {
+  auto temporary = make_temporary_filename(filename);
+  auto file      = std::fopen(temporary.c_str(), "wb");
+  if (!file) {
+    error = filename + ": cannot create file (" + std::strerror(errno) + ")";
+    return false;
+  }
+  auto written = std::fwrite(data.data(), 1, data.size(), file);
+  auto closed  = std::fclose(file) == 0;
+  if (written != data.size() || !closed) {
+    std::remove(temporary.c_str());
+    error = filename + ": cannot write file";
+    return false;
+  }
+  if (std::rename(temporary.c_str(), filename.c_str()) != 0) {
+    error = filename + ": cannot rename temporary file (" + std::strerror(errno) + ")";
+    std::remove(temporary.c_str());
+    return false;
+  }
+  return true;
+}
+
+bool load_text(const std::string& filename, std::string& text, std::string& error) {
+  return load_binary(filename, text, error);
+}
+
+bool save_text(const std::string& filename, const std::string& text, std::string& error) {
+  return save_binary(filename, text, error);
+}
+
+// Shortest decimal form of a float that reads back to the same float.
+static std::string format_float(float value) {
+  char buffer[64];
+  auto result = std::to_chars(buffer, buffer + sizeof(buffer), value);
+  return std::string(buffer, result.ptr);
+}
+
+}  // namespace yocto
+
+// -----------------------------------------------------------------------------
+// PLY SHAPES
+// -----------------------------------------------------------------------------
+namespace yocto {
+
+enum struct ply_format { ascii, binary_little_endian, binary_big_endian };
+enum struct ply_type { i8, u8, i16, u16, i32, u32, f32, f64 };
+
+struct ply_property {
+  std::string name       = "";
+  ply_type    type       = ply_type::f32;
+  bool        is_list    = false;
+  ply_type    count_type = ply_type::u8;
+};
+
+struct ply_element {
+  std::string               name       = "";
+  size_t                    count      = 0;
+  std::vector<ply_property> properties = {};
+};
+
+// Where reading is in the data; `line` counts lines for ascii messages.
+struct ply_cursor {
+  const char* data      = nullptr;
+  size_t      size      = 0;
+  size_t      pos       = 0;
+  int         line      = 1;
+  ply_format  format    = ply_format::ascii;
+  bool        bad_token = false;  // an ascii token that is not a number
+  std::string token     = "";     // that token, for the message
+};
+
+static bool parse_ply_type(const std::string& name, ply_type& type) {
+  static const auto names = std::unordered_map<std::string, ply_type>{
+      {"char", ply_type::i8}, {"int8", ply_type::i8}, {"uchar", ply_type::u8},
+      {"uint8", ply_type::u8}, {"short", ply_type::i16}, {"int16", ply_type::i16},
+      {"ushort", ply_type::u16}, {"uint16", ply_type::u16}, {"int", ply_type::i32},
+      {"int32", ply_type::i32}, {"uint", ply_type::u32}, {"uint32", ply_type::u32},
+      {"float", ply_type::f32}, {"float32", ply_type::f32},
+      {"double", ply_type::f64}, {"float64", ply_type::f64}};
+  auto found = names.find(name);
+  if (found == names.end()) return false;
+  type = found->second;
+  return true;
+}
+
+static size_t ply_type_size(ply_type type) {
+  switch (type) {
+    case ply_type::i8:
+    case ply_type::u8: return 1;
+    case ply_type::i16:
+    case ply_type::u16: return 2;
+    case ply_type::i32:
+    case ply_type::u32:
+    case ply_type::f32: return 4;
+    case ply_type::f64: return 8;
+  }
+  return 1;
+}
+
+static constexpr bool host_little_endian = __BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__;
+
+// Loads a value of type T stored with the given byte order.
+template <typename T>
+static inline T load_raw(const char* ptr, bool swap) {
+  auto value = T{};
+  if (!swap) {
+    std::memcpy(&value, ptr, sizeof(T));
+  } else {
+    char bytes[sizeof(T)];
+    for (size_t k = 0; k < sizeof(T); k++) bytes[k] = ptr[sizeof(T) - 1 - k];
+    std::memcpy(&value, bytes, sizeof(T));
+  }
+  return value;
+}
+
+static inline double load_binary_value(const char* ptr, ply_type type, bool swap) {
+  switch (type) {
+    case ply_type::i8: return load_raw<int8_t>(ptr, swap);
+    case ply_type::u8: return load_raw<uint8_t>(ptr, swap);
+    case ply_type::i16: return load_raw<int16_t>(ptr, swap);
+    case ply_type::u16: return load_raw<uint16_t>(ptr, swap);
+    case ply_type::i32: return load_raw<int32_t>(ptr, swap);
+    case ply_type::u32: return load_raw<uint32_t>(ptr, swap);
+    case ply_type::f32: return load_raw<float>(ptr, swap);
+    case ply_type::f64: return load_raw<double>(ptr, swap);
+  }
+  return 0;
+}
+
+static bool swap_bytes(ply_format format) {
+  return format == (host_little_endian ? ply_format::binary_big_endian
+                                       : ply_format::binary_little_endian);
+}
+
+// Reads the next value; false at the end of the data or, for ascii, on a
+// token that is not a number (bad_token is set then).
+static inline bool read_ply_value(ply_cursor& cursor, ply_type type, double& value) {
+  if (cursor.format != ply_format::ascii) {
+    auto size = ply_type_size(type);
+    if (cursor.size - cursor.pos < size) return false;
+    value = load_binary_value(cursor.data + cursor.pos, type, swap_bytes(cursor.format));
+    cursor.pos += size;
+    return true;
+  }
+  while (cursor.pos < cursor.size && std::isspace((unsigned char)cursor.data[cursor.pos])) {
+    if (cursor.data[cursor.pos] == '\n') cursor.line++;
+    cursor.pos++;
+  }
+  if (cursor.pos == cursor.size) return false;
+  auto start = cursor.pos;
+  while (cursor.pos < cursor.size && !std::isspace((unsigned char)cursor.data[cursor.pos]))
+    cursor.pos++;
+  auto first = cursor.data + start, last = cursor.data + cursor.pos;
+  if (*first == '+') first++;  // from_chars does not take a leading plus
+  auto result = std::from_chars(first, last, value);
+  if (result.ec != std::errc{} || result.ptr != last) {
+    cursor.bad_token = true;
+    cursor.token     = std::string(cursor.data + start, cursor.data + cursor.pos);
+    return false;
+  }
+  return true;
+}
+
+static bool ply_data_error(const std::string& filename, const ply_cursor& cursor,
+    const ply_element& element, size_t row, std::string& error) {
+  if (cursor.bad_token) {
+    error = filename + ": line " + std::to_string(cursor.line) + ": element " +
+            element.name + " index " + std::to_string(row) + ": \"" + cursor.token +
+            "\" is not a number";
+  } else {
+    error = filename + ": element " + element.name + " ran out of data at index " +
+            std::to_string(row) + " of " + std::to_string(element.count);
+  }
+  return false;
+}
+
+static bool parse_ply_header(const std::string& filename, ply_cursor& cursor,
+    std::vector<ply_element>& elements, std::string& error) {
+  auto has_format = false;
+  auto line_error = [&](const std::string& message) {
+    error = filename + ": line " + std::to_string(cursor.line) + ": " + message;
+    return false;
+  };
+  while (true) {
+    if (cursor.pos >= cursor.size)
+      return line_error("header ends without end_header");
+    auto end = std::find(cursor.data + cursor.pos, cursor.data + cursor.size, '\n');
+    auto text = std::string(cursor.data + cursor.pos, end);
+    cursor.pos = end - cursor.data + (end != cursor.data + cursor.size ? 1 : 0);
+    if (!text.empty() && text.back() == '\r') text.pop_back();
+    auto tokens = std::vector<std::string>{};
+    for (size_t i = 0; i < text.size();) {
+      while (i < text.size() && std::isspace((unsigned char)text[i])) i++;
+      auto start = i;
+      while (i < text.size() && !std::isspace((unsigned char)text[i])) i++;
+      if (i > start) tokens.push_back(text.substr(start, i - start));
+    }
+    if (cursor.line == 1) {
+      if (tokens.size() != 1 || tokens[0] != "ply")
+        return line_error("not a PLY file (expected \"ply\")");
+    } else if (tokens.empty() || tokens[0] == "comment" || tokens[0] == "obj_info") {
+      // nothing to read
+    } else if (tokens[0] == "format") {
+      if (tokens.size() != 3) return line_error("expected \"format TYPE 1.0\"");
+      if (tokens[1] == "ascii") cursor.format = ply_format::ascii;
+      else if (tokens[1] == "binary_little_endian")
+        cursor.format = ply_format::binary_little_endian;
+      else if (tokens[1] == "binary_big_endian")
+        cursor.format = ply_format::binary_big_endian;
+      else return line_error("unknown format \"" + tokens[1] + "\"");
+      has_format = true;
+    } else if (tokens[0] == "element") {
+      if (tokens.size() != 3) return line_error("expected \"element NAME COUNT\"");
+      auto count  = (unsigned long long)0;
+      auto& value = tokens[2];
+      auto  result = std::from_chars(value.data(), value.data() + value.size(), count);
+      if (result.ec != std::errc{} || result.ptr != value.data() + value.size())
+        return line_error("bad count \"" + value + "\" for element " + tokens[1]);
+      elements.push_back({tokens[1], (size_t)count, {}});
+    } else if (tokens[0] == "property") {
+      if (elements.empty()) return line_error("property before any element");
+      auto property = ply_property{};
+      if (tokens.size() == 5 && tokens[1] == "list") {
+        if (!parse_ply_type(tokens[2], property.count_type))
+          return line_error("unknown property type \"" + tokens[2] + "\"");
+        if (!parse_ply_type(tokens[3], property.type))
+          return line_error("unknown property type \"" + tokens[3] + "\"");
+        property.is_list = true;
+        property.name    = tokens[4];
+      } else if (tokens.size() == 3 && tokens[1] != "list") {
+        if (!parse_ply_type(tokens[1], property.type))
+          return line_error("unknown property type \"" + tokens[1] + "\"");
+        property.name = tokens[2];
+      } else {
+        return line_error("expected \"property TYPE NAME\" or "
+                          "\"property list COUNT_TYPE TYPE NAME\"");
+      }
+      elements.back().properties.push_back(property);
+    } else if (tokens[0] == "end_header") {
+      if (!has_format) return line_error("end_header before any format line");
+      cursor.line++;
+      return true;
+    } else {
+      return line_error("unknown header keyword \"" + tokens[0] + "\"");
+    }
+    cursor.line++;
+  }
+}
+
+// Vertex properties we keep, each read into its own column.
+enum struct ply_column { x, y, z, nx, ny, nz, u, v, radius, count };
+
+static int ply_vertex_column(const std::string& name) {
+  static const auto names = std::unordered_map<std::string, ply_column>{
+      {"x", ply_column::x}, {"y", ply_column::y}, {"z", ply_column::z},
+      {"nx", ply_column::nx}, {"ny", ply_column::ny}, {"nz", ply_column::nz},
+      {"u", ply_column::u}, {"s", ply_column::u}, {"texture_u", ply_column::u},
+      {"texture_s", ply_column::u}, {"v", ply_column::v}, {"t", ply_column::v},
+      {"texture_v", ply_column::v}, {"texture_t", ply_column::v},
+      {"radius", ply_column::radius}};
+  auto found = names.find(name);
+  return found == names.end() ? -1 : (int)found->second;
+}
+
+// Fewest bytes one row of the element can take: bounds memory reserved
+// from a header count that the data may not back.
+static size_t ply_min_row_bytes(const ply_element& element, ply_format format) {
+  auto bytes = (size_t)0;
+  for (auto& property : element.properties) {
+    if (format == ply_format::ascii) bytes += 2;
+    else bytes += ply_type_size(property.is_list ? property.count_type : property.type);
+  }
+  return std::max(bytes, (size_t)1);
+}
+
+// Reads the rows of one element: scalar property p of row r goes to
+// on_scalar(p, r, value), list property p to on_list(p, r, values), which
+// returns false (with the error set) to stop.
+template <typename OnScalar, typename OnList>
+static bool read_ply_rows(const std::string& filename, ply_cursor& cursor,
+    const ply_element& element, OnScalar&& on_scalar, OnList&& on_list,
+    std::string& error) {
+  auto has_lists = false;
+  for (auto& property : element.properties) has_lists |= property.is_list;
+  if (cursor.format != ply_format::ascii && !has_lists) {
+    // Fixed-size rows: check the size once, then read column by column.
+    auto stride = (size_t)0;
+    for (auto& property : element.properties) stride += ply_type_size(property.type);
+    if (stride == 0) return true;
+    auto available = (cursor.size - cursor.pos) / stride;
+    if (available < element.count)
+      return ply_data_error(filename, cursor, element, available, error);
+    auto swap   = swap_bytes(cursor.format);
+    auto offset = (size_t)0;
+    for (auto p = 0; p < (int)element.properties.size(); p++) {
+      auto  type = element.properties[p].type;
+      auto* base = cursor.data + cursor.pos + offset;
+      for (size_t row = 0; row < element.count; row++)
+        on_scalar(p, row, load_binary_value(base + row * stride, type, swap));
+      offset += ply_type_size(type);
+    }
+    cursor.pos += element.count * stride;
+    return true;
+  }
+  auto values = std::vector<double>{};
+  for (size_t row = 0; row < element.count; row++) {
+    for (auto p = 0; p < (int)element.properties.size(); p++) {
+      auto& property = element.properties[p];
+      auto  value    = 0.0;
+      if (!property.is_list) {
+        if (!read_ply_value(cursor, property.type, value))
+          return ply_data_error(filename, cursor, element, row, error);
+        on_scalar(p, row, value);
+        continue;
+      }
+      if (!read_ply_value(cursor, property.count_type, value))
+        return ply_data_error(filename, cursor, element, row, error);
+      // A list cannot be longer than the data left: reject absurd lengths
+      // before allocating for them.
+      if (value < 0 || value != std::floor(value)) {
+        error = filename + ": element " + element.name + " index " + std::to_string(row) +
+                ": bad list length " + format_float((float)value);
+        return false;
+      }
+      auto min_bytes = cursor.format == ply_format::ascii ? 1 : ply_type_size(property.type);
+      if (value * min_bytes > (double)(cursor.size - cursor.pos))
+        return ply_data_error(filename, cursor, element, row, error);
+      values.resize((size_t)value);
+      for (auto& item : values) {
+        if (!read_ply_value(cursor, property.type, item))
+          return ply_data_error(filename, cursor, element, row, error);
+      }
+      if (!on_list(p, row, values)) return false;
+    }
+  }
+  return true;
+}
+
+bool load_shape(const std::string& filename, shape_data& shape, std::string& error) {
+  shape     = {};
+  auto data = std::string{};
+  if (!load_binary(filename, data, error)) return false;
+  auto cursor   = ply_cursor{data.data(), data.size()};
+  auto elements = std::vector<ply_element>{};
+  if (!parse_ply_header(filename, cursor, elements, error)) return false;
+
+  // The vertex count is known from the header, so indices can be checked as
+  // they are read, whatever the element order.
+  auto num_vertices = (size_t)0, num_vertex_elements = (size_t)0;
+  for (auto& element : elements) {
+    if (element.name != "vertex") continue;
+    num_vertices = element.count;
+    num_vertex_elements++;
+  }
+  if (num_vertex_elements > 1) {
+    error = filename + ": more than one vertex element";
+    return false;
+  }
+
+  auto columns = std::array<std::vector<float>, (size_t)ply_column::count>{};
+  auto kinds   = 0;
+  for (auto& element : elements) {
+    auto remaining = data.size() - cursor.pos;
+    auto max_rows  = std::min(element.count,
+         remaining / ply_min_row_bytes(element, cursor.format) + 1);
+    if (element.name == "vertex") {
+      auto targets = std::vector<int>{};
+      for (auto& property : element.properties)
+        targets.push_back(property.is_list ? -1 : ply_vertex_column(property.name));
+      for (auto c : {ply_column::x, ply_column::y, ply_column::z}) {
+        if (std::find(targets.begin(), targets.end(), (int)c) == targets.end()) {
+          error = filename + ": element vertex has no property " +
+                  std::string(1, "xyz"[(int)c]);
+          return false;
+        }
+      }
+      for (auto target : targets)
+        if (target >= 0) columns[target].resize(max_rows);
+      auto on_scalar = [&](int p, size_t row, double value) {
+        if (targets[p] < 0) return;
+        if (row >= columns[targets[p]].size()) columns[targets[p]].resize(row + 1);
+        columns[targets[p]][row] = (float)value;
+      };
+      auto on_list = [](int, size_t, const std::vector<double>&) { return true; };
+      if (!read_ply_rows(filename, cursor, element, on_scalar, on_list, error)) return false;
+      continue;
+    }
+    auto is_face = element.name == "face", is_line = element.name == "line",
+         is_curve = element.name == "curve";
+    auto index_property = -1;
+    for (auto p = 0; p < (int)element.properties.size(); p++) {
+      auto& property = element.properties[p];
+      if (property.is_list &&
+          (property.name == "vertex_indices" || property.name == "vertex_index"))
+        index_property = p;
+    }
+    if ((is_face || is_line || is_curve) && index_property < 0) {
+      error = filename + ": element " + element.name + " has no vertex_indices list";
+      return false;
+    }
+    if ((is_face || is_line || is_curve) && element.count > 0) kinds++;
+    if (is_face) shape.triangles.reserve(max_rows);
+    if (is_line) shape.lines.reserve(max_rows);
+    if (is_curve) shape.curves.reserve(max_rows);
+    auto on_scalar = [](int, size_t, double) {};
+    auto on_list   = [&](int p, size_t row, const std::vector<double>& values) {
+      if (p != index_property || !(is_face || is_line || is_curve)) return true;
+      auto row_error = [&](const std::string& message) {
+        error = filename + ": element " + element.name + " index " + std::to_string(row) +
+                ": " + message;
+        return false;
+      };
+      for (auto value : values) {
+        if (value < 0 || value >= (double)num_vertices || value != std::floor(value))
+          return row_error("vertex index " + format_float((float)value) +
+                           " out of range (" + std::to_string(num_vertices) +
+                           " vertices)");
+      }
+      auto count = values.size();
+      if (is_face) {
+        if (count < 3)
+          return row_error("has " + std::to_string(count) + " vertices, at least 3 needed");
+        // Polygons become a triangle fan around their first vertex.
+        for (size_t k = 1; k + 1 < count; k++)
+          shape.triangles.push_back({(int)values[0], (int)values[k], (int)values[k + 1]});
+      } else if (is_line) {
+        if (count < 2)
+          return row_error("has " + std::to_string(count) + " vertices, at least 2 needed");
+        // Polylines become consecutive segments.
+        for (size_t k = 0; k + 1 < count; k++)
+          shape.lines.push_back({(int)values[k], (int)values[k + 1]});
+      } else {
+        if (count != 4)
+          return row_error("has " + std::to_string(count) + " vertices, expected 4");
+        shape.curves.push_back(
+            {(int)values[0], (int)values[1], (int)values[2], (int)values[3]});
+      }
+      return true;
+    };
+    if (!read_ply_rows(filename, cursor, element, on_scalar, on_list, error)) return false;
+  }
+  if (kinds > 1) {
+    error = filename + ": holds more than one of faces, lines and curves";
+    return false;
+  }
+
+  auto column = [&](ply_column c) -> std::vector<float>& { return columns[(int)c]; };
+  shape.positions.resize(num_vertices);
+  for (size_t i = 0; i < num_vertices; i++)
+    shape.positions[i] = {column(ply_column::x)[i], column(ply_column::y)[i],
+        column(ply_column::z)[i]};
+  if (!column(ply_column::nx).empty() && !column(ply_column::ny).empty() &&
+      !column(ply_column::nz).empty()) {
+    shape.normals.resize(num_vertices);
+    for (size_t i = 0; i < num_vertices; i++)
+      shape.normals[i] = {column(ply_column::nx)[i], column(ply_column::ny)[i],
+          column(ply_column::nz)[i]};
+  }
+  if (!column(ply_column::u).empty() && !column(ply_column::v).empty()) {
+    shape.texcoords.resize(num_vertices);
+    for (size_t i = 0; i < num_vertices; i++)
+      shape.texcoords[i] = {column(ply_column::u)[i], column(ply_column::v)[i]};
+  }
+  if (!column(ply_column::radius).empty()) {
+    shape.radius = std::move(column(ply_column::radius));
+    shape.radius.resize(num_vertices);
+  }
+
+  // No NaN or Inf may reach the renderer.
+  for (auto c = 0; c < (int)ply_column::count; c++) {
+    for (size_t i = 0; i < columns[c].size() && i < num_vertices; i++) {
+      if (!std::isfinite(columns[c][i])) {
+        error = filename + ": element vertex index " + std::to_string(i) +
+                ": value is not finite";
+        return false;
+      }
+    }
+  }
+  for (size_t i = 0; i < shape.radius.size(); i++) {
+    if (!std::isfinite(shape.radius[i]) || shape.radius[i] < 0) {
+      error = filename + ": element vertex index " + std::to_string(i) +
+              ": radius is negative or not finite";
+      return false;
+    }
+  }
+  return true;
+}
+
+// Appends a little-endian binary value.
+template <typename T>
+static inline void append_raw(std::string& buffer, T value) {
+  char bytes[sizeof(T)];
+  std::memcpy(bytes, &value, sizeof(T));
+  if (!host_little_endian) std::reverse(bytes, bytes + sizeof(T));
+  buffer.append(bytes, sizeof(T));
+}
+
+bool save_shape(const std::string& filename, const shape_data& shape,
+    std::string& error, bool ascii) {
+  auto num_vertices = shape.positions.size();
+  auto check_size   = [&](size_t size, const char* what) {
+    if (size == 0 || size == num_vertices) return true;
+    error = filename + ": cannot save shape: " + what + " has " + std::to_string(size) +
+            " values for " + std::to_string(num_vertices) + " vertices";
+    return false;
+  };
+  if (!check_size(shape.normals.size(), "normals") ||
+      !check_size(shape.texcoords.size(), "texcoords") ||
+      !check_size(shape.radius.size(), "radius"))
+    return false;
+  auto kinds = (int)!shape.triangles.empty() + (int)!shape.lines.empty() +
+               (int)!shape.curves.empty();
+  if (kinds > 1) {
+    error = filename + ": cannot save shape: it holds more than one of triangles, "
+                       "lines and curves";
+    return false;
+  }
+
+  // Element: name, number of indices per element, the indices.
+  auto element_name = std::string{};
+  auto element_size = 0;
+  auto indices      = (const int*)nullptr;
+  auto num_elements = (size_t)0;
+  if (!shape.triangles.empty()) {
+    element_name = "face", element_size = 3, num_elements = shape.triangles.size();
+    indices = &shape.triangles[0].x;
+  } else if (!shape.lines.empty()) {
+    element_name = "line", element_size = 2, num_elements = shape.lines.size();
+    indices = &shape.lines[0].x;
+  } else if (!shape.curves.empty()) {
+    element_name = "curve", element_size = 4, num_elements = shape.curves.size();
+    indices = &shape.curves[0].x;
+  }
+
+  auto data = std::string{};
+  data += "ply\nformat ";
+  data += ascii ? "ascii" : "binary_little_endian";
+  data += " 1.0\ncomment Written by yocto-hair\n";
+  data += "element vertex " + std::to_string(num_vertices) + "\n";
+  data += "property float x\nproperty float y\nproperty float z\n";
+  if (!shape.normals.empty()) data += "property float nx\nproperty float ny\nproperty float nz\n";
+  if (!shape.texcoords.empty()) data += "property float u\nproperty float v\n";
+  if (!shape.radius.empty()) data += "property float radius\n";
+  if (num_elements > 0) {
+    data += "element " + element_name + " " + std::to_string(num_elements) + "\n";
+    data += "property list uchar int vertex_indices\n";
+  }
+  data += "end_header\n";
+
+  // One row of vertex values, in header order.
+  auto row    = std::vector<float>{};
+  auto values = [&](size_t i) {
+    row.clear();
+    row.insert(row.end(), {shape.positions[i].x, shape.positions[i].y, shape.positions[i].z});
+    if (!shape.normals.empty())
+      row.insert(row.end(), {shape.normals[i].x, shape.normals[i].y, shape.normals[i].z});
+    if (!shape.texcoords.empty())
+      row.insert(row.end(), {shape.texcoords[i].x, shape.texcoords[i].y});
+    if (!shape.radius.empty()) row.push_back(shape.radius[i]);
+  };
+  if (ascii) {
+    for (size_t i = 0; i < num_vertices; i++) {
+      values(i);
+      for (size_t k = 0; k < row.size(); k++) {
+        if (k > 0) data += ' ';
+        data += format_float(row[k]);
+      }
+      data += '\n';
+    }
+    for (size_t e = 0; e < num_elements; e++) {
+      data += std::to_string(element_size);
+      for (auto k = 0; k < element_size; k++)
+        data += " " + std::to_string(indices[e * element_size + k]);
+      data += '\n';
+    }
+  } else {
+    auto row_size = 3 + (shape.normals.empty() ? 0 : 3) +
+                    (shape.texcoords.empty() ? 0 : 2) + (shape.radius.empty() ? 0 : 1);
+    data.reserve(data.size() + num_vertices * row_size * 4 +
+                 num_elements * (1 + 4 * element_size));
+    for (size_t i = 0; i < num_vertices; i++) {
+      values(i);
+      for (auto value : row) append_raw(data, value);
+    }
+    for (size_t e = 0; e < num_elements; e++) {
+      append_raw(data, (uint8_t)element_size);
+      for (auto k = 0; k < element_size; k++)
+        append_raw(data, (int32_t)indices[e * element_size + k]);
+    }
+  }
+  return save_binary(filename, data, error);
+}
+
+}  // namespace yocto
+
+// -----------------------------------------------------------------------------
+// IMAGES
+// -----------------------------------------------------------------------------
+namespace yocto {
+
+// sRGB transfer function (IEC 61966-2-1).
+static float srgb_to_linear(float c) {
+  return c <= 0.04045f ? c / 12.92f : std::pow((c + 0.055f) / 1.055f, 2.4f);
+}
+static float linear_to_srgb(float c) {
+  return c <= 0.0031308f ? 12.92f * c : 1.055f * std::pow(c, 1 / 2.4f) - 0.055f;
+}
+
+static bool is_linear_extension(const std::string& extension) {
+  return extension == ".exr" || extension == ".hdr" || extension == ".pfm";
+}
+static bool is_8bit_extension(const std::string& extension) {
+  return extension == ".png" || extension == ".jpg" || extension == ".jpeg";
+}
+
+bool is_image_filename(const std::string& filename) {
+  auto extension = path_extension(filename);
+  return is_linear_extension(extension) || is_8bit_extension(extension);
+}
+
+bool load_image(const std::string& filename, texture_data& image, std::string& error) {
+  image      = {};
+  auto input = OIIO::ImageInput::open(filename);
+  if (!input) {
+    auto message = OIIO::geterror();
+    error = filename + ": cannot open image" + (message.empty() ? "" : " (" + message + ")");
+    return false;
+  }
+  auto& spec     = input->spec();
+  auto  channels = spec.nchannels;
+  if (spec.width <= 0 || spec.height <= 0 || channels <= 0) {
+    error = filename + ": image has no pixels";
+    return false;
+  }
+  // Guard the size computation against absurd headers.
+  auto num_pixels = (size_t)spec.width * (size_t)spec.height;
+  if (num_pixels > ((size_t)1 << 31) / (size_t)channels) {
+    error = filename + ": image too large (" + std::to_string(spec.width) + "x" +
+            std::to_string(spec.height) + ")";
+    return false;
+  }
+  auto buffer = std::vector<float>(num_pixels * channels);
+  if (!input->read_image(0, 0, 0, channels, OIIO::TypeDesc::FLOAT, buffer.data())) {
+    error = filename + ": cannot read image (" + input->geterror() + ")";
+    return false;
+  }
+  input->close();
+
+  // Float formats are linear; integer formats are sRGB unless they say
+  // otherwise.
+  auto colorspace = spec.get_string_attribute("oiio:ColorSpace");
+  auto linear     = spec.format.is_floating_point() || colorspace == "Linear" ||
+                colorspace == "linear";
+  image.width  = spec.width;
+  image.height = spec.height;
+  image.pixels.resize(num_pixels);
+  for (size_t i = 0; i < num_pixels; i++) {
+    auto* pixel = buffer.data() + i * channels;
+    // Grey (with or without alpha) becomes RGB; alpha is dropped.
+    auto rgb = channels < 3 ? vec3f{pixel[0], pixel[0], pixel[0]}
+                            : vec3f{pixel[0], pixel[1], pixel[2]};
+    if (!linear)
+      rgb = {srgb_to_linear(rgb.x), srgb_to_linear(rgb.y), srgb_to_linear(rgb.z)};
+    if (!isfinite(rgb)) {
+      error = filename + ": pixel (" + std::to_string(i % spec.width) + ", " +
+              std::to_string(i / spec.width) + ") is not finite";
+      image = {};
+      return false;
+    }
+    image.pixels[i] = rgb;
+  }
+  return true;
+}
+
+bool save_image(const std::string& filename, const texture_data& image,
+    std::string& error, float exposure) {
+  auto extension = path_extension(filename);
+  if (!is_image_filename(filename)) {
+    error = filename + ": unknown image extension \"" + extension +
+            "\" (use exr, hdr, pfm, png or jpg)";
+    return false;
+  }
+  if (image.width <= 0 || image.height <= 0 ||
+      image.pixels.size() != (size_t)image.width * (size_t)image.height) {
+    error = filename + ": cannot save image: " + std::to_string(image.pixels.size()) +
+            " pixels for size " + std::to_string(image.width) + "x" +
+            std::to_string(image.height);
+    return false;
+  }
+  for (size_t i = 0; i < image.pixels.size(); i++) {
+    if (!isfinite(image.pixels[i])) {
+      error = filename + ": cannot save image: pixel (" +
+              std::to_string(i % image.width) + ", " + std::to_string(i / image.width) +
+              ") is not finite";
+      return false;
+    }
+  }
+
+  auto linear    = is_linear_extension(extension);
+  auto temporary = make_temporary_filename(filename);
+  auto output    = OIIO::ImageOutput::create(temporary);
+  if (!output) {
+    error = filename + ": cannot save image (" + OIIO::geterror() + ")";
+    return false;
+  }
+  auto type = linear ? OIIO::TypeDesc::FLOAT : OIIO::TypeDesc::UINT8;
+  auto spec = OIIO::ImageSpec(image.width, image.height, 3, type);
+  if (!linear) spec.attribute("oiio:ColorSpace", "sRGB");
+  auto failed = [&](const std::string& what) {
+    error = filename + ": " + what + " (" + output->geterror() + ")";
+    output.reset();
+    std::remove(temporary.c_str());
+    return false;
+  };
+  if (!output->open(temporary, spec)) return failed("cannot create image");
+  auto written = false;
+  if (linear) {
+    written = output->write_image(OIIO::TypeDesc::FLOAT, image.pixels.data());
+  } else {
+    auto scale = std::exp2(exposure);
+    auto bytes = std::vector<uint8_t>(image.pixels.size() * 3);
+    for (size_t i = 0; i < image.pixels.size(); i++) {
+      for (auto c = 0; c < 3; c++) {
+        auto value = std::clamp(image.pixels[i][c] * scale, 0.0f, 1.0f);
+        bytes[i * 3 + c] = (uint8_t)std::lround(linear_to_srgb(value) * 255);
+      }
+    }
+    written = output->write_image(OIIO::TypeDesc::UINT8, bytes.data());
+  }
+  if (!written) return failed("cannot write image");
+  if (!output->close()) return failed("cannot finish image");
+  output.reset();
+  if (std::rename(temporary.c_str(), filename.c_str()) != 0) {
+    error = filename + ": cannot rename temporary file (" + std::strerror(errno) + ")";
+    std::remove(temporary.c_str());
+    return false;
+  }
+  return true;
+}
+
+}  // namespace yocto
+
+// -----------------------------------------------------------------------------
+// JSON SCENES: LOADING
+// -----------------------------------------------------------------------------
+namespace yocto {
+
+// Ordered so that elements keyed by name (4.0 layout) keep the file's order.
+using json = nlohmann::ordered_json;
+
+// What a material element said, kept until instances tell which materials
+// dress fibers: that decides the type of a material without one.
+struct json_material_info {
+  bool                     has_type        = false;
+  bool                     has_hair_keys   = false;
+  bool                     has_eumelanin   = false;
+  bool                     has_pheomelanin = false;
+  bool                     has_color       = false;
+  std::vector<std::string> keys            = {};
+};
+
+// Everything load_scene needs besides the scene: where files are, what the
+// elements referred to, and the messages.
+struct json_loader {
+  std::string                     filename       = "";
+  std::string                     dirname        = "";
+  std::string                     error          = "";
+  std::vector<std::string>        warnings       = {};
+  std::vector<std::string>        shape_uris     = {};
+  std::vector<std::string>        shape_users    = {};  // who named it first
+  std::vector<std::string>        texture_uris   = {};  // "" is textures/NAME.*
+  std::vector<std::string>        texture_users  = {};
+  std::vector<json_material_info> material_infos = {};
+};
+
+static bool json_fail(json_loader& loader, const std::string& message) {
+  loader.error = loader.filename + ": " + message;
+  return false;
+}
+
+static void json_warn(json_loader& loader, const std::string& message) {
+  loader.warnings.push_back(loader.filename + ": " + message);
+}
+
+static std::string json_key(const std::string& element, const std::string& key) {
+  return element + ": key \"" + key + "\"";
+}
+
+static std::string json_describe(const json& value) {
+  if (value.is_array()) return "an array of " + std::to_string(value.size()) + " values";
+  if (value.is_string()) return "the string \"" + value.get<std::string>() + "\"";
+  if (value.is_boolean()) return value.get<bool>() ? "true" : "false";
+  if (value.is_number()) return value.dump();
+  return std::string("a ") + value.type_name();
+}
+
+static bool read_number(json_loader& loader, const json& value, const std::string& where,
+    float& number, float min = flt_min, float max = flt_max, bool open_min = false) {
+  if (!value.is_number())
+    return json_fail(loader, where + ": expected a number, got " + json_describe(value));
+  number = (float)value.get<double>();
+  if (!std::isfinite(number))
+    return json_fail(loader, where + ": " + value.dump() + " is not a finite float");
+  if (number < min || number > max || (open_min && number == min)) {
+    auto range = std::string{};
+    if (max == flt_max) range = (open_min ? "> " : ">= ") + format_float(min);
+    else range = "in [" + format_float(min) + ", " + format_float(max) + "]";
+    return json_fail(loader, where + ": expected a number " + range + ", got " +
+                                 format_float(number));
+  }
+  return true;
+}
+
+static bool read_numbers(json_loader& loader, const json& value, const std::string& where,
+    float* numbers, int count, float min = flt_min, float max = flt_max) {
+  if (!value.is_array() || value.size() != (size_t)count)
+    return json_fail(loader, where + ": expected an array of " + std::to_string(count) +
+                                 " numbers, got " + json_describe(value));
+  for (auto i = 0; i < count; i++)
+    if (!read_number(loader, value[i], where, numbers[i], min, max)) return false;
+  return true;
+}
+
+static bool read_vec3(json_loader& loader, const json& value, const std::string& where,
+    vec3f& v, float min = flt_min, float max = flt_max) {
+  return read_numbers(loader, value, where, &v.x, 3, min, max);
+}
+
+// A frame is 12 numbers: the x, y and z axes, then the origin.
+static bool read_frame(
+    json_loader& loader, const json& value, const std::string& where, frame3f& frame) {
+  float numbers[12];
+  if (!read_numbers(loader, value, where, numbers, 12)) return false;
+  frame = {{numbers[0], numbers[1], numbers[2]}, {numbers[3], numbers[4], numbers[5]},
+      {numbers[6], numbers[7], numbers[8]}, {numbers[9], numbers[10], numbers[11]}};
+  return true;
+}
+
+// A lookat is 9 numbers: from, to, up. Degenerate ones would make NaN axes.
+static bool read_lookat(json_loader& loader, const json& value, const std::string& where,
+    frame3f& frame, float& distance) {
+  float numbers[9];
+  if (!read_numbers(loader, value, where, numbers, 9)) return false;
+  auto from = vec3f{numbers[0], numbers[1], numbers[2]};
+  auto to   = vec3f{numbers[3], numbers[4], numbers[5]};
+  auto up   = vec3f{numbers[6], numbers[7], numbers[8]};
+  distance  = length(from - to);
+  if (!(distance > 0)) return json_fail(loader, where + ": from and to coincide");
+  if (!(length(cross(up, normalize(from - to))) > 1e-6f * length(up)))
+    return json_fail(loader, where + ": up is zero or parallel to the view direction");
+  frame = lookat_frame(from, to, up);
+  return true;
+}
+
+static bool read_bool(
+    json_loader& loader, const json& value, const std::string& where, bool& flag) {
+  if (!value.is_boolean())
+    return json_fail(loader, where + ": expected true or false, got " + json_describe(value));
+  flag = value.get<bool>();
+  return true;
+}
+
+static bool read_string(
+    json_loader& loader, const json& value, const std::string& where, std::string& text) {
+  if (!value.is_string())
+    return json_fail(loader, where + ": expected a string, got " + json_describe(value));
+  text = value.get<std::string>();
+  return true;
+}
+
+static bool read_count(
+    json_loader& loader, const json& value, const std::string& where, int& count) {
+  if (!value.is_number_integer() || value.get<int64_t>() < 0 ||
+      value.get<int64_t>() > std::numeric_limits<int>::max())
+    return json_fail(loader, where + ": expected a non-negative integer, got " +
+                                 json_describe(value));
+  count = (int)value.get<int64_t>();
+  return true;
+}
+
+enum struct json_reference { shape, texture, material };
+
+// A reference is an index (4.2 layout) or a name (4.0 layout). A name with
+// no element makes one for shapes and textures, whose files are then found
+// by name (shapes/NAME.ply, textures/NAME.*), as Yocto 4.0 did.
+static bool read_reference(json_loader& loader, scene_data& scene, const json& value,
+    const std::string& where, const std::string& user, json_reference kind, int& index) {
+  auto& names = kind == json_reference::shape     ? scene.shape_names
+                : kind == json_reference::texture ? scene.texture_names
+                                                  : scene.material_names;
+  auto  what  = kind == json_reference::shape     ? std::string("shape")
+                : kind == json_reference::texture ? std::string("texture")
+                                                  : std::string("material");
+  if (value.is_number_integer()) {
+    auto number = value.get<int64_t>();
+    if (number == -1 && kind == json_reference::texture) {
+      index = -1;
+      return true;
+    }
+    if (number < 0 || number >= (int64_t)names.size())
+      return json_fail(loader, where + ": " + what + " reference " + value.dump() +
+                                   " out of range (" + std::to_string(names.size()) +
+                                   " " + what + "s)");
+    index = (int)number;
+    return true;
+  }
+  if (!value.is_string())
+    return json_fail(loader, where + ": expected a " + what +
+                                 " index or name, got " + json_describe(value));
+  auto name  = value.get<std::string>();
+  auto found = std::find(names.begin(), names.end(), name);
+  if (found != names.end()) {
+    index = (int)(found - names.begin());
+    return true;
+  }
+  if (kind == json_reference::material)
+    return json_fail(loader, where + ": unknown material \"" + name + "\"");
+  index = (int)names.size();
+  names.push_back(name);
+  if (kind == json_reference::shape) {
+    scene.shapes.emplace_back();
+    loader.shape_uris.push_back("shapes/" + name + ".ply");
+    loader.shape_users.push_back(user);
+  } else {
+    scene.textures.emplace_back();
+    loader.texture_uris.push_back("");
+    loader.texture_users.push_back(user);
+  }
+  return true;
+}
+
+// Calls parse(element, name, label) for each element of a group: an array of
+// objects (4.2 layout) or an object keyed by name (4.0 layout).
+template <typename Parse>
+static bool parse_group(json_loader& loader, const json& group,
+    const std::string& group_name, const std::string& kind, Parse&& parse) {
+  if (group.is_array()) {
+    for (size_t i = 0; i < group.size(); i++) {
+      auto& element = group[i];
+      auto  label   = kind + " " + std::to_string(i);
+      if (!element.is_object())
+        return json_fail(loader, label + ": expected an object, got " + json_describe(element));
+      auto name = std::string{};
+      if (element.contains("name") &&
+          !read_string(loader, element["name"], json_key(label, "name"), name))
+        return false;
+      if (!name.empty()) label = kind + " \"" + name + "\"";
+      if (!parse(element, name, label)) return false;
+    }
+    return true;
+  }
+  if (group.is_object()) {
+    for (auto& [name, element] : group.items()) {
+      auto label = kind + " \"" + name + "\"";
+      if (!element.is_object())
+        return json_fail(loader, label + ": expected an object, got " + json_describe(element));
+      if (!parse(element, name, label)) return false;
+    }
+    return true;
+  }
+  return json_fail(loader, "group \"" + group_name +
+                               "\": expected an array or an object, got " +
+                               json_describe(group));
+}
+
+static void warn_unknown_key(
+    json_loader& loader, const std::string& label, const std::string& key) {
+  json_warn(loader, label + ": unknown key \"" + key + "\" ignored");
+}
+
+static bool parse_camera(json_loader& loader, const json& element,
+    const std::string& label, camera_data& camera) {
+  auto has_focus = false, has_frame = false, has_lookat = false;
+  auto distance  = 0.0f;
+  for (auto& [key, value] : element.items()) {
+    auto where = json_key(label, key);
+    auto ok    = true;
+    if (key == "name") continue;
+    else if (key == "lens") ok = read_number(loader, value, where, camera.lens, 0, flt_max, true);
+    else if (key == "film") ok = read_number(loader, value, where, camera.film, 0, flt_max, true);
+    else if (key == "aspect")
+      ok = read_number(loader, value, where, camera.aspect, 0, flt_max, true);
+    else if (key == "focus")
+      ok = has_focus = read_number(loader, value, where, camera.focus, 0, flt_max, true);
+    else if (key == "aperture") ok = read_number(loader, value, where, camera.aperture, 0);
+    else if (key == "orthographic") ok = read_bool(loader, value, where, camera.orthographic);
+    else if (key == "frame") ok = has_frame = read_frame(loader, value, where, camera.frame);
+    else if (key == "lookat")
+      ok = has_lookat = read_lookat(loader, value, where, camera.frame, distance);
+    else warn_unknown_key(loader, label, key);
+    if (!ok) return false;
+  }
+  if (has_frame && has_lookat)
+    return json_fail(loader, label + ": has both \"frame\" and \"lookat\"");
+  // As Yocto/GL: a camera placed by lookat focuses on its target.
+  if (has_lookat && !has_focus) camera.focus = distance;
+  return true;
+}
+
+static bool parse_environment(json_loader& loader, scene_data& scene,
+    const json& element, const std::string& label, environment_data& environment) {
+  for (auto& [key, value] : element.items()) {
+    auto where = json_key(label, key);
+    auto ok    = true;
+    if (key == "name") continue;
+    else if (key == "emission") ok = read_vec3(loader, value, where, environment.emission, 0);
+    else if (key == "emission_tex")
+      ok = read_reference(loader, scene, value, where, label, json_reference::texture,
+          environment.emission_tex);
+    else if (key == "frame") ok = read_frame(loader, value, where, environment.frame);
+    else warn_unknown_key(loader, label, key);
+    if (!ok) return false;
+  }
+  return true;
+}
+
+static bool parse_instance(json_loader& loader, scene_data& scene, const json& element,
+    const std::string& label, instance_data& instance) {
+  auto has_frame = false, has_lookat = false;
+  auto distance  = 0.0f;
+  for (auto& [key, value] : element.items()) {
+    auto where = json_key(label, key);
+    auto ok    = true;
+    if (key == "name") continue;
+    else if (key == "frame") ok = has_frame = read_frame(loader, value, where, instance.frame);
+    else if (key == "lookat")
+      ok = has_lookat = read_lookat(loader, value, where, instance.frame, distance);
+    else if (key == "shape")
+      ok = read_reference(
+          loader, scene, value, where, label, json_reference::shape, instance.shape);
+    else if (key == "material")
+      ok = read_reference(
+          loader, scene, value, where, label, json_reference::material, instance.material);
+    else warn_unknown_key(loader, label, key);
+    if (!ok) return false;
+  }
+  if (has_frame && has_lookat)
+    return json_fail(loader, label + ": has both \"frame\" and \"lookat\"");
+  if (!element.contains("shape")) return json_fail(loader, label + ": no \"shape\" given");
+  if (!element.contains("material"))
+    return json_fail(loader, label + ": no \"material\" given");
+  return true;
+}
+
+// Yocto/GL material types we do not model, mapped to the nearest we do.
+static bool parse_material_type(json_loader& loader, const json& value,
+    const std::string& where, material_type& type) {
+  auto name = std::string{};
+  if (!read_string(loader, value, where, name)) return false;
+  for (auto t = 0; t < (int)material_type_names.size(); t++) {
+    if (name == material_type_names[t]) {
+      type = (material_type)t;
+      return true;
+    }
+  }
+  static const auto glossy_like = std::unordered_set<std::string>{
+      "plastic", "metal", "metallic", "reflective", "gltfpbr", "coated"};
+  static const auto matte_like = std::unordered_set<std::string>{"transparent",
+      "refractive", "subsurface", "volumetric", "thinglass", "glass", "passthrough"};
+  if (glossy_like.count(name) || matte_like.count(name)) {
+    type = glossy_like.count(name) ? material_type::glossy : material_type::matte;
+    json_warn(loader, where + ": material type \"" + name + "\" is not supported, using " +
+                          material_type_names[(int)type]);
+    return true;
+  }
+  return json_fail(loader, where + ": unknown material type \"" + name +
+                               "\" (expected matte, glossy or hair)");
+}
+
+static const auto hair_keys = std::unordered_set<std::string>{"sigma_a", "sigmaA",
+    "eumelanin", "pheomelanin", "beta_m", "betaM", "beta_n", "betaN", "alpha", "eta"};
+
+static bool parse_material(json_loader& loader, scene_data& scene, const json& element,
+    const std::string& label, material_data& material, json_material_info& info) {
+  auto& hair = material.hair;
+  for (auto& [key, value] : element.items()) {
+    auto where = json_key(label, key);
+    auto ok    = true;
+    if (key == "name") continue;
+    info.keys.push_back(key);
+    info.has_hair_keys |= hair_keys.count(key) != 0;
+    if (key == "type") {
+      ok = info.has_type = parse_material_type(loader, value, where, material.type);
+    } else if (key == "emission") {
+      ok = read_vec3(loader, value, where, material.emission, 0);
+    } else if (key == "color") {
+      ok = info.has_color = read_vec3(loader, value, where, material.color, 0);
+    } else if (key == "roughness") {
+      ok = read_number(loader, value, where, material.roughness, 0, 1);
+    } else if (key == "ior") {
+      ok = read_number(loader, value, where, material.ior, 0, flt_max, true);
+    } else if (key == "emission_tex") {
+      ok = read_reference(
+          loader, scene, value, where, label, json_reference::texture, material.emission_tex);
+    } else if (key == "color_tex") {
+      ok = read_reference(
+          loader, scene, value, where, label, json_reference::texture, material.color_tex);
+    } else if (key == "sigma_a" || key == "sigmaA") {
+      ok = hair.has_sigma_a = read_vec3(loader, value, where, hair.sigma_a, 0);
+    } else if (key == "eumelanin") {
+      ok = info.has_eumelanin = read_number(loader, value, where, hair.eumelanin, 0);
+    } else if (key == "pheomelanin") {
+      ok = info.has_pheomelanin = read_number(loader, value, where, hair.pheomelanin, 0);
+    } else if (key == "beta_m" || key == "betaM") {
+      ok = read_number(loader, value, where, hair.beta_m, 0, 1);
+    } else if (key == "beta_n" || key == "betaN") {
+      ok = read_number(loader, value, where, hair.beta_n, 0, 1);
+    } else if (key == "alpha") {
+      ok = read_number(loader, value, where, hair.alpha, -90, 90);
+    } else if (key == "eta") {
+      ok = read_number(loader, value, where, hair.eta, 0, flt_max, true);
+    } else {
+      info.keys.pop_back();
+      warn_unknown_key(loader, label, key);
+    }
+    if (!ok) return false;
+  }
+  return true;
+}
+
+// Once the type is known: hair takes the colour as its own, each type drops
+// (with a warning) the keys it does not use, and the pigment defaults apply.
+static bool finish_material(json_loader& loader, const std::string& label,
+    material_data& material, const json_material_info& info) {
+  auto used = [&](const std::string& key) {
+    if (key == "type" || key == "emission" || key == "emission_tex" || key == "color")
+      return true;
+    switch (material.type) {
+      case material_type::matte: return key == "color_tex";
+      case material_type::glossy:
+        return key == "color_tex" || key == "roughness" || key == "ior";
+      case material_type::hair: return hair_keys.count(key) != 0;
+    }
+    return false;
+  };
+  for (auto& key : info.keys) {
+    if (!used(key))
+      json_warn(loader, label + ": key \"" + key + "\" is not used by " +
+                            material_type_names[(int)material.type] +
+                            " materials, ignored");
+  }
+  auto defaults = material_data{};
+  if (material.type == material_type::hair) {
+    if (info.has_color) {
+      if (max_component(material.color) > 1)
+        return json_fail(loader, json_key(label, "color") +
+                                     ": a hair colour must be in [0, 1]");
+      material.hair.color     = material.color;
+      material.hair.has_color = true;
+    }
+    // pbrt's rule: one pigment given means the other is 0.
+    if (info.has_pheomelanin && !info.has_eumelanin) material.hair.eumelanin = 0;
+    if (info.has_eumelanin && !info.has_pheomelanin) material.hair.pheomelanin = 0;
+    material.color     = defaults.color;
+    material.color_tex = defaults.color_tex;
+    material.roughness = defaults.roughness;
+    material.ior       = defaults.ior;
+  } else {
+    material.hair = defaults.hair;
+    if (material.type == material_type::matte) {
+      material.roughness = defaults.roughness;
+      material.ior       = defaults.ior;
+    }
+  }
+  return true;
+}
+
+static bool parse_asset(json_loader& loader, scene_data& scene, const json& asset) {
+  if (!asset.is_object())
+    return json_fail(loader, "group \"asset\": expected an object, got " + json_describe(asset));
+  for (auto& [key, value] : asset.items()) {
+    if (key == "copyright") {
+      if (!read_string(loader, value, json_key("asset", key), scene.copyright)) return false;
+    } else if (key != "version" && key != "generator") {
+      warn_unknown_key(loader, "asset", key);
+    }
+  }
+  return true;
+}
+
+static bool parse_settings(json_loader& loader, scene_data& scene, const json& settings) {
+  if (!settings.is_object())
+    return json_fail(loader, "group \"settings\": expected an object, got " +
+                                 json_describe(settings));
+  for (auto& [key, value] : settings.items()) {
+    auto where = json_key("settings", key);
+    auto ok    = true;
+    if (key == "resolution") ok = read_count(loader, value, where, scene.settings.resolution);
+    else if (key == "samples") ok = read_count(loader, value, where, scene.settings.samples);
+    else if (key == "bounces") ok = read_count(loader, value, where, scene.settings.bounces);
+    else warn_unknown_key(loader, "settings", key);
+    if (!ok) return false;
+  }
+  return true;
+}
+
+// A file reference of a texture or shape element; 4.0 groups keyed by name
+// may leave it out and use the default place.
+static bool parse_file_element(json_loader& loader, const json& element,
+    const std::string& label, bool uri_required, std::string& uri) {
+  for (auto& [key, value] : element.items()) {
+    if (key == "name") continue;
+    if (key == "uri") {
+      if (!read_string(loader, value, json_key(label, key), uri)) return false;
+    } else {
+      warn_unknown_key(loader, label, key);
+    }
+  }
+  if (uri_required && uri.empty()) return json_fail(loader, label + ": no \"uri\" given");
+  return true;
+}
+
+// Finds textures/NAME.EXT for a texture that a 4.0 scene names without a file.
+static bool find_texture_file(json_loader& loader, const std::string& name,
+    const std::string& label, std::string& uri) {
+  static const char* extensions[] = {".hdr", ".exr", ".png", ".jpg", ".jpeg", ".pfm"};
+  for (auto extension : extensions) {
+    auto candidate = "textures/" + name + extension;
+    auto ec        = std::error_code{};
+    if (std::filesystem::is_regular_file(path_join(loader.dirname, candidate), ec)) {
+      uri = candidate;
+      return true;
+    }
+  }
+  return json_fail(loader, label + ": no image file textures/" + name +
+                               ".{hdr,exr,png,jpg,jpeg,pfm} in " +
+                               (loader.dirname.empty() ? "." : loader.dirname));
+}
+
+// The type of a material that names none: hair keys make it hair, and so
+// does dressing fibers alone; anything else is matte.
+static material_type infer_material_type(const scene_data& scene, int material,
+    const json_material_info& info) {
+  if (info.has_hair_keys) return material_type::hair;
+  auto used = false, fibers_only = true;
+  for (auto& instance : scene.instances) {
+    if (instance.material != material) continue;
+    used = true;
+    fibers_only &= is_fiber(scene.shapes[instance.shape]);
+  }
+  return used && fibers_only ? material_type::hair : material_type::matte;
+}
+
+// Line and column of a byte offset, for json syntax errors.
+static std::string text_position(const std::string& text, size_t byte) {
+  auto line = 1, column = 1;
+  for (size_t i = 0; i < byte && i < text.size(); i++) {
+    if (text[i] == '\n') line++, column = 1;
+    else column++;
+  }
+  return "line " + std::to_string(line) + ", column " + std::to_string(column);
+}
+
+static bool load_scene_json(json_loader& loader, scene_data& scene) {
+  auto text = std::string{};
+  if (!load_text(loader.filename, text, loader.error)) return false;
+  auto js = json{};
+  try {
+    js = json::parse(text);
+  } catch (const json::parse_error& exception) {
+    // nlohmann reports the byte just past the error; drop its own prefix.
+    auto message = std::string(exception.what());
+    auto column  = message.find(", column ");
+    auto colon   = message.find(": ", column == std::string::npos ? 0 : column);
+    if (colon != std::string::npos) message = message.substr(colon + 2);
+    auto byte = exception.byte > 0 ? exception.byte - 1 : 0;
+    return json_fail(loader, text_position(text, byte) + ": malformed json: " + message);
+  }
+  if (!js.is_object())
+    return json_fail(loader, "expected a json object at the top, got " + json_describe(js));
+
+  // Groups go in dependency order, whatever their order in the file.
+  static const auto known_groups = std::unordered_set<std::string>{"asset", "settings",
+      "textures", "shapes", "materials", "cameras", "environments", "distant_lights",
+      "instances", "objects"};
+  for (auto& [key, value] : js.items())
+    if (!known_groups.count(key)) json_warn(loader, "unknown group \"" + key + "\" ignored");
+  auto group = [&](const char* name) -> const json* {
+    auto found = js.find(name);
+    return found == js.end() ? nullptr : &*found;
+  };
+
+  if (auto asset = group("asset"); asset && !parse_asset(loader, scene, *asset)) return false;
+  if (auto settings = group("settings");
+      settings && !parse_settings(loader, scene, *settings))
+    return false;
+  if (auto textures = group("textures")) {
+    auto keyed = textures->is_object();
+    auto ok    = parse_group(loader, *textures, "textures", "texture",
+           [&](const json& element, const std::string& name, const std::string& label) {
+          auto uri = std::string{};
+          if (!parse_file_element(loader, element, label, !keyed, uri)) return false;
+          scene.textures.emplace_back();
+          scene.texture_names.push_back(name);
+          loader.texture_uris.push_back(uri);
+          loader.texture_users.push_back("");
+          return true;
+        });
+    if (!ok) return false;
+  }
+  if (auto shapes = group("shapes")) {
+    auto keyed = shapes->is_object();
+    auto ok    = parse_group(loader, *shapes, "shapes", "shape",
+           [&](const json& element, const std::string& name, const std::string& label) {
+          auto uri = std::string{};
+          if (!parse_file_element(loader, element, label, !keyed, uri)) return false;
+          if (uri.empty()) uri = "shapes/" + name + ".ply";
+          scene.shapes.emplace_back();
+          scene.shape_names.push_back(name);
+          loader.shape_uris.push_back(uri);
+          loader.shape_users.push_back("");
+          return true;
+        });
+    if (!ok) return false;
+  }
+  if (auto materials = group("materials")) {
+    auto ok = parse_group(loader, *materials, "materials", "material",
+        [&](const json& element, const std::string& name, const std::string& label) {
+          auto material = material_data{};
+          auto info     = json_material_info{};
+          if (!parse_material(loader, scene, element, label, material, info)) return false;
+          scene.materials.push_back(material);
+          scene.material_names.push_back(name);
+          loader.material_infos.push_back(info);
+          return true;
+        });
+    if (!ok) return false;
+  }
+  if (auto cameras = group("cameras")) {
+    auto ok = parse_group(loader, *cameras, "cameras", "camera",
+        [&](const json& element, const std::string& name, const std::string& label) {
+          auto camera = camera_data{};
+          if (!parse_camera(loader, element, label, camera)) return false;
+          scene.cameras.push_back(camera);
+          scene.camera_names.push_back(name);
+          return true;
+        });
+    if (!ok) return false;
+  }
+  if (auto environments = group("environments")) {
+    auto ok = parse_group(loader, *environments, "environments", "environment",
+        [&](const json& element, const std::string& name, const std::string& label) {
+          auto environment = environment_data{};
+          if (!parse_environment(loader, scene, element, label, environment)) return false;
+          scene.environments.push_back(environment);
+          scene.environment_names.push_back(name);
+          return true;
+        });
+    if (!ok) return false;
+  }
+  if (auto lights = group("distant_lights")) {
+    auto ok = parse_group(loader, *lights, "distant_lights", "distant light",
+        [&](const json& element, const std::string&, const std::string& label) {
+          auto light = distant_light_data{};
+          for (auto& [key, value] : element.items()) {
+            auto where = json_key(label, key);
+            auto ok    = true;
+            if (key == "name") continue;
+            else if (key == "direction") ok = read_vec3(loader, value, where, light.direction);
+            else if (key == "emission") ok = read_vec3(loader, value, where, light.emission, 0);
+            else warn_unknown_key(loader, label, key);
+            if (!ok) return false;
+          }
+          if (!(length(light.direction) > 0))
+            return json_fail(loader, json_key(label, "direction") + ": is zero");
+          scene.distant_lights.push_back(light);
+          return true;
+        });
+    if (!ok) return false;
+  }
+  for (auto group_name : {"instances", "objects"}) {
+    auto instances = group(group_name);
+    if (!instances) continue;
+    auto ok = parse_group(loader, *instances, group_name, "instance",
+        [&](const json& element, const std::string& name, const std::string& label) {
+          auto instance = instance_data{};
+          if (!parse_instance(loader, scene, element, label, instance)) return false;
+          scene.instances.push_back(instance);
+          scene.instance_names.push_back(name);
+          return true;
+        });
+    if (!ok) return false;
+  }
+
+  // Files, relative to the json's directory.
+  auto element_label = [](const char* kind, const std::string& name,
+                           const std::string& user, int index) {
+    auto label = name.empty() ? std::string(kind) + " " + std::to_string(index)
+                              : std::string(kind) + " \"" + name + "\"";
+    return user.empty() ? label : label + " (used by " + user + ")";
+  };
+  for (auto i = 0; i < (int)scene.shapes.size(); i++) {
+    auto label = element_label(
+        "shape", scene.shape_names[i], loader.shape_users[i], i);
+    auto error = std::string{};
+    if (!load_shape(path_join(loader.dirname, loader.shape_uris[i]), scene.shapes[i], error))
+      return json_fail(loader, label + ": " + error);
+  }
+  for (auto i = 0; i < (int)scene.textures.size(); i++) {
+    auto label = element_label(
+        "texture", scene.texture_names[i], loader.texture_users[i], i);
+    auto& uri = loader.texture_uris[i];
+    if (uri.empty() && !find_texture_file(loader, scene.texture_names[i], label, uri))
+      return false;
+    auto error = std::string{};
+    if (!load_image(path_join(loader.dirname, uri), scene.textures[i], error))
+      return json_fail(loader, label + ": " + error);
+  }
+
+  for (auto i = 0; i < (int)scene.materials.size(); i++) {
+    auto& material = scene.materials[i];
+    auto& info     = loader.material_infos[i];
+    if (!info.has_type) material.type = infer_material_type(scene, i, info);
+    auto label = element_label("material", scene.material_names[i], "", i);
+    if (!finish_material(loader, label, material, info)) return false;
+  }
+
+  auto error = std::string{};
+  if (!validate_scene(scene, error)) return json_fail(loader, error);
+  return true;
+}
+
+bool load_scene(const std::string& filename, scene_data& scene, std::string& error,
+    std::vector<std::string>* warnings) {
+  scene       = {};
+  auto loader = json_loader{filename, path_dirname(filename)};
+  auto ok     = load_scene_json(loader, scene);
+  if (warnings) {
+    warnings->insert(warnings->end(), loader.warnings.begin(), loader.warnings.end());
+  } else {
+    for (auto& warning : loader.warnings) std::cerr << "warning: " << warning << "\n";
+  }
+  if (!ok) {
+    error = loader.error;
+    scene = {};
+  }
+  return ok;
+}
+
+}  // namespace yocto
+
+// -----------------------------------------------------------------------------
+// JSON SCENES: SAVING
+// -----------------------------------------------------------------------------
+namespace yocto {
+
+// The double whose shortest decimal form is the float's shortest form, so
+// that files read "0.1", not "0.10000000149011612", and still load back to
+// the same float.
+static double json_number(float value) {
+  auto text   = format_float(value);
+  auto number = 0.0;
+  std::from_chars(text.data(), text.data() + text.size(), number);
+  return (float)number == value ? number : (double)value;
+}
+
+static json json_array(const float* values, int count) {
+  auto array = json::array();
+  for (auto i = 0; i < count; i++) array.push_back(json_number(values[i]));
+  return array;
+}
+static json json_vec3(const vec3f& v) { return json_array(&v.x, 3); }
+static json json_frame(const frame3f& frame) {
+  float values[12] = {frame.x.x, frame.x.y, frame.x.z, frame.y.x, frame.y.y, frame.y.z,
+      frame.z.x, frame.z.y, frame.z.z, frame.o.x, frame.o.y, frame.o.z};
+  return json_array(values, 12);
+}
+
+static std::string element_name(const std::vector<std::string>& names, size_t index) {
+  return index < names.size() ? names[index] : std::string{};
+}
+
+// Unique file names under a directory, from element names made safe.
+static std::vector<std::string> make_file_names(const std::vector<std::string>& names,
+    size_t count, const std::string& kind, const std::string& extension) {
+  auto files = std::vector<std::string>{};
+  auto used  = std::unordered_set<std::string>{};
+  for (size_t i = 0; i < count; i++) {
+    auto stem = element_name(names, i);
+    for (auto& c : stem)
+      if (!std::isalnum((unsigned char)c) && c != '-' && c != '_' && c != '.') c = '_';
+    if (stem.empty() || stem[0] == '.') stem = kind + std::to_string(i);
+    auto unique = stem;
+    for (auto k = 1; used.count(unique); k++) unique = stem + "-" + std::to_string(k);
+    used.insert(unique);
+    files.push_back(unique + extension);
+  }
+  return files;
+}
+
+static json make_scene_json(const scene_data& scene,
+    const std::vector<std::string>& shape_files,
+    const std::vector<std::string>& texture_files) {
+  auto js           = json::object();
+  auto named        = [](const std::vector<std::string>& names, size_t index) {
+    auto element = json::object();
+    auto name    = element_name(names, index);
+    if (!name.empty()) element["name"] = name;
+    return element;
+  };
+  js["asset"] = {{"version", "4.2"}, {"generator", "yocto-hair"}};
+  if (!scene.copyright.empty()) js["asset"]["copyright"] = scene.copyright;
+  auto& settings = scene.settings;
+  if (settings.resolution != 0 || settings.samples != 0 || settings.bounces != 0)
+    js["settings"] = {{"resolution", settings.resolution}, {"samples", settings.samples},
+        {"bounces", settings.bounces}};
+
+  auto cameras = json::array();
+  for (size_t i = 0; i < scene.cameras.size(); i++) {
+    auto& camera            = scene.cameras[i];
+    auto  element           = named(scene.camera_names, i);
+    element["frame"]        = json_frame(camera.frame);
+    element["orthographic"] = camera.orthographic;
+    element["lens"]         = json_number(camera.lens);
+    element["film"]         = json_number(camera.film);
+    element["aspect"]       = json_number(camera.aspect);
+    element["focus"]        = json_number(camera.focus);
+    element["aperture"]     = json_number(camera.aperture);
+    cameras.push_back(element);
+  }
+  if (!cameras.empty()) js["cameras"] = cameras;
+
+  auto environments = json::array();
+  for (size_t i = 0; i < scene.environments.size(); i++) {
+    auto& environment   = scene.environments[i];
+    auto  element       = named(scene.environment_names, i);
+    element["frame"]    = json_frame(environment.frame);
+    element["emission"] = json_vec3(environment.emission);
+    if (environment.emission_tex >= 0) element["emission_tex"] = environment.emission_tex;
+    environments.push_back(element);
+  }
+  if (!environments.empty()) js["environments"] = environments;
+
+  auto lights = json::array();
+  for (auto& light : scene.distant_lights) {
+    auto element         = json::object();
+    element["direction"] = json_vec3(light.direction);
+    element["emission"]  = json_vec3(light.emission);
+    lights.push_back(element);
+  }
+  if (!lights.empty()) js["distant_lights"] = lights;
+
+  auto textures = json::array();
+  for (size_t i = 0; i < scene.textures.size(); i++) {
+    auto element   = named(scene.texture_names, i);
+    element["uri"] = "textures/" + texture_files[i];
+    textures.push_back(element);
+  }
+  if (!textures.empty()) js["textures"] = textures;
+
+  auto shapes = json::array();
+  for (size_t i = 0; i < scene.shapes.size(); i++) {
+    auto element   = named(scene.shape_names, i);
+    element["uri"] = "shapes/" + shape_files[i];
+    shapes.push_back(element);
+  }
+  if (!shapes.empty()) js["shapes"] = shapes;
+
+  // Each type writes the keys it uses (the loader ignores the others).
+  auto materials = json::array();
+  for (size_t i = 0; i < scene.materials.size(); i++) {
+    auto& material      = scene.materials[i];
+    auto  element       = named(scene.material_names, i);
+    element["type"]     = material_type_names[(int)material.type];
+    element["emission"] = json_vec3(material.emission);
+    if (material.emission_tex >= 0) element["emission_tex"] = material.emission_tex;
+    if (material.type == material_type::hair) {
+      auto& hair = material.hair;
+      if (hair.has_sigma_a) element["sigma_a"] = json_vec3(hair.sigma_a);
+      if (hair.has_color) element["color"] = json_vec3(hair.color);
+      element["eumelanin"]   = json_number(hair.eumelanin);
+      element["pheomelanin"] = json_number(hair.pheomelanin);
+      element["beta_m"]      = json_number(hair.beta_m);
+      element["beta_n"]      = json_number(hair.beta_n);
+      element["alpha"]       = json_number(hair.alpha);
+      element["eta"]         = json_number(hair.eta);
+    } else {
+      element["color"] = json_vec3(material.color);
+      if (material.color_tex >= 0) element["color_tex"] = material.color_tex;
+      if (material.type == material_type::glossy) {
+        element["roughness"] = json_number(material.roughness);
+        element["ior"]       = json_number(material.ior);
+      }
+    }
+    materials.push_back(element);
+  }
+  if (!materials.empty()) js["materials"] = materials;
+
+  auto instances = json::array();
+  for (size_t i = 0; i < scene.instances.size(); i++) {
+    auto& instance      = scene.instances[i];
+    auto  element       = named(scene.instance_names, i);
+    element["frame"]    = json_frame(instance.frame);
+    element["shape"]    = instance.shape;
+    element["material"] = instance.material;
+    instances.push_back(element);
+  }
+  if (!instances.empty()) js["instances"] = instances;
+  return js;
+}
+
+bool save_scene(const std::string& filename, const scene_data& scene,
+    std::string& error, bool ascii_shapes) {
+  if (!validate_scene(scene, error)) {
+    error = filename + ": cannot save scene: " + error;
+    return false;
+  }
+  auto directory     = path_dirname(filename);
+  auto shape_files   = make_file_names(scene.shape_names, scene.shapes.size(), "shape", ".ply");
+  auto texture_files = make_file_names(
+      scene.texture_names, scene.textures.size(), "texture", ".exr");
+
+  // On failure, remove what this call created, and only that.
+  auto created_files = std::vector<std::string>{};
+  auto created_dirs  = std::vector<std::string>{};
+  auto undo          = [&]() {
+    for (auto& file : created_files) std::remove(file.c_str());
+    for (auto it = created_dirs.rbegin(); it != created_dirs.rend(); ++it) {
+      auto ec = std::error_code{};
+      std::filesystem::remove(*it, ec);  // only if empty
+    }
+    return false;
+  };
+  auto make_directory = [&](const std::string& name) {
+    auto path = path_join(directory, name);
+    auto ec   = std::error_code{};
+    if (std::filesystem::is_directory(path, ec)) return true;
+    if (!std::filesystem::create_directory(path, ec)) {
+      error = path + ": cannot create directory (" + ec.message() + ")";
+      return false;
+    }
+    created_dirs.push_back(path);
+    return true;
+  };
+  auto save_file = [&](const std::string& path, auto&& save) {
+    auto ec     = std::error_code{};
+    auto exists = std::filesystem::exists(path, ec);
+    if (!save(path)) return false;
+    if (!exists) created_files.push_back(path);
+    return true;
+  };
+
+  if (!scene.shapes.empty() && !make_directory("shapes")) return undo();
+  for (size_t i = 0; i < scene.shapes.size(); i++) {
+    auto path = path_join(directory, "shapes/" + shape_files[i]);
+    if (!save_file(path, [&](const std::string& file) {
+          return save_shape(file, scene.shapes[i], error, ascii_shapes);
+        }))
+      return undo();
+  }
+  if (!scene.textures.empty() && !make_directory("textures")) return undo();
+  for (size_t i = 0; i < scene.textures.size(); i++) {
+    auto path = path_join(directory, "textures/" + texture_files[i]);
+    if (!save_file(path, [&](const std::string& file) {
+          return save_image(file, scene.textures[i], error);
+        }))
+      return undo();
+  }
+  auto text = make_scene_json(scene, shape_files, texture_files).dump(2) + "\n";
+  if (!save_text(filename, text, error)) return undo();
+  return true;
+}
+
+}  // namespace yocto
