@@ -1,0 +1,316 @@
+//
+// Implementation of Yocto/HairGen.
+//
+
+#include "yocto_hairgen.h"
+
+#include <zlib.h>
+
+#include <cstdio>
+#include <memory>
+
+#include "yocto_sampling.h"
+
+// -----------------------------------------------------------------------------
+// STRANDS
+// -----------------------------------------------------------------------------
+namespace yocto {
+
+void append_catmull_rom_strand(shape_data& shape, const std::vector<vec3f>& points,
+    float root_radius, float tip_radius) {
+  auto n = (int)points.size();
+  if (n < 2) return;
+  // Tangents of a uniform Catmull-Rom spline; at the ends, the chord.
+  auto tangent = [&](int i) {
+    if (i == 0) return points[1] - points[0];
+    if (i == n - 1) return points[n - 1] - points[n - 2];
+    return (points[i + 1] - points[i - 1]) / 2.0f;
+  };
+  auto radius = [&](float t) { return root_radius + (tip_radius - root_radius) * t; };
+  auto base   = (int)shape.positions.size();
+  shape.positions.push_back(points[0]);
+  shape.radius.push_back(radius(0));
+  for (auto i = 0; i < n - 1; i++) {
+    // Hermite to Bezier: inner control points at a third of the tangents.
+    shape.positions.push_back(points[i] + tangent(i) / 3.0f);
+    shape.positions.push_back(points[i + 1] - tangent(i + 1) / 3.0f);
+    shape.positions.push_back(points[i + 1]);
+    auto t0 = (float)i / (n - 1), t1 = (float)(i + 1) / (n - 1);
+    shape.radius.push_back(radius(t0 + (t1 - t0) / 3));
+    shape.radius.push_back(radius(t0 + 2 * (t1 - t0) / 3));
+    shape.radius.push_back(radius(t1));
+    auto first = base + 3 * i;
+    shape.curves.push_back({first, first + 1, first + 2, first + 3});
+  }
+}
+
+// Keeps a point at least `offset` times the radius away from the head center.
+static vec3f push_out_of_head(const vec3f& p, float offset) {
+  auto d = p - hair_head_center;
+  auto l = length(d);
+  if (l >= hair_head_radius * offset) return p;
+  if (l == 0) return hair_head_center + vec3f{0, hair_head_radius * offset, 0};
+  return hair_head_center + d / l * (hair_head_radius * offset);
+}
+
+// A root on the scalp: the head's upper part, denser on top, none on the face
+// side (+z below the hairline).
+static vec3f sample_scalp(rng_state& rng) {
+  while (true) {
+    auto n = sample_sphere(rand2f(rng));
+    if (n.y < -0.2f) continue;
+    if (n.z > 0.55f && n.y < 0.45f) continue;  // face
+    return n;
+  }
+}
+
+// A strand that grows from the scalp, bends down under its weight and slides
+// over the head; curly strands add a helix around that path.
+static std::vector<vec3f> make_head_strand(rng_state& rng, int npoints, bool curly) {
+  auto normal = sample_scalp(rng);
+  auto length = (curly ? 9.0f : 11.0f) * (0.85f + 0.3f * rand1f(rng));
+  auto step   = length / (npoints - 1);
+  auto p      = hair_head_center + normal * (hair_head_radius * 1.01f);
+  auto d      = normalize(normal + vec3f{0, 0.2f, 0});
+  auto gravity = vec3f{0, -1, 0};
+  auto path    = std::vector<vec3f>{p};
+  for (auto k = 1; k < npoints; k++) {
+    auto jitter = (rand3f(rng) - 0.5f) * 0.15f;
+    d           = normalize(d * 0.65f + gravity * 0.35f + jitter);
+    p           = push_out_of_head(p + d * step, 1.02f + 0.08f * (float)k / npoints);
+    path.push_back(p);
+  }
+  if (!curly) return path;
+  // Curls: a helix around the path, radius and period varying per strand,
+  // growing from nothing at the root.
+  auto curl_radius = 0.3f + 0.3f * rand1f(rng);
+  auto period      = 1.4f + 0.8f * rand1f(rng);
+  auto phase       = 2 * pif * rand1f(rng);
+  auto curled      = std::vector<vec3f>{path[0]};
+  for (auto k = 1; k < npoints; k++) {
+    auto along  = safe_normalize(path[k] - path[k - 1]);
+    auto basis  = basis_fromz(along);
+    auto angle  = phase + 2 * pif * (k * step) / period;
+    auto ramp   = std::min(1.0f, k * step / 1.5f);
+    auto offset = (basis[0] * std::cos(angle) + basis[1] * std::sin(angle)) * curl_radius * ramp;
+    curled.push_back(push_out_of_head(path[k] + offset, 1.01f));
+  }
+  return curled;
+}
+
+// A strand of a lock of curls: a helix hanging from the lock's root, each
+// strand offset within the lock's cross-section.
+static std::vector<vec3f> make_lock_strand(rng_state& rng, int npoints) {
+  auto top      = vec3f{-4, 11.5f, 0};
+  auto length   = 10.0f * (0.92f + 0.08f * rand1f(rng));
+  auto radius   = 0.8f;
+  auto period   = 2.4f;
+  auto r        = 0.38f * std::sqrt(rand1f(rng));
+  auto a        = 2 * pif * rand1f(rng);
+  auto points   = std::vector<vec3f>{};
+  for (auto k = 0; k < npoints; k++) {
+    auto t     = length * k / (npoints - 1);
+    auto angle = 2 * pif * t / period;
+    // The helix widens a little towards the tip, as a lock under its weight.
+    auto helix = radius * std::min(1.0f, t / 1.2f) * (1 + 0.15f * t / length);
+    auto side  = vec3f{std::cos(angle), 0, std::sin(angle)};
+    auto out   = vec3f{-std::sin(angle), 0, std::cos(angle)};
+    auto noise = (rand3f(rng) - 0.5f) * 0.04f;
+    points.push_back(top + vec3f{0, -t, 0} + side * (helix + r * std::cos(a)) +
+                     out * (r * std::sin(a)) + vec3f{0, 0.25f * r * std::sin(a + angle), 0} +
+                     noise);
+  }
+  return points;
+}
+
+// A fiber of the block: straight along z through the unit cube.
+static std::vector<vec3f> make_block_fiber(rng_state& rng, int index, int count, int npoints) {
+  auto side = std::max(1, (int)std::ceil(std::sqrt((float)count)));
+  auto cell = 1.0f / side;
+  auto x    = (index % side + 0.2f + 0.6f * rand1f(rng)) * cell;
+  auto y    = (index / side + 0.2f + 0.6f * rand1f(rng)) * cell;
+  auto points = std::vector<vec3f>{};
+  for (auto k = 0; k < npoints; k++) points.push_back({x, y, (float)k / (npoints - 1)});
+  return points;
+}
+
+shape_data make_hair_strands(const hair_style_params& params) {
+  auto shape    = shape_data{};
+  auto defaults = std::array<int, 4>{8, 24, 40, 1};
+  auto radii    = std::array<float, 4>{0.012f, 0.01f, 0.008f, 0.003f};
+  auto style    = (int)params.style;
+  auto segments = params.segments > 0 ? params.segments : defaults[style];
+  auto radius   = params.radius > 0 ? params.radius : radii[style];
+  auto npoints  = segments + 1;
+  shape.positions.reserve((size_t)params.strands * (3 * segments + 1));
+  shape.radius.reserve(shape.positions.capacity());
+  shape.curves.reserve((size_t)params.strands * segments);
+  for (auto s = 0; s < params.strands; s++) {
+    // One stream per strand: the same strand whatever the strand count.
+    auto rng    = make_rng(params.seed, 2 * (uint64_t)s + 1);
+    auto points = std::vector<vec3f>{};
+    switch (params.style) {
+      case hair_style::straight: points = make_head_strand(rng, npoints, false); break;
+      case hair_style::curly: points = make_head_strand(rng, npoints, true); break;
+      case hair_style::curls: points = make_lock_strand(rng, npoints); break;
+      case hair_style::block:
+        points = make_block_fiber(rng, s, params.strands, npoints);
+        break;
+    }
+    auto tip = params.style == hair_style::block ? radius : radius * 0.2f;
+    append_catmull_rom_strand(shape, points, radius, tip);
+  }
+  return shape;
+}
+
+}  // namespace yocto
+
+// -----------------------------------------------------------------------------
+// SKY AND SCENES
+// -----------------------------------------------------------------------------
+namespace yocto {
+
+texture_data make_sky_texture(int width, int height, const vec3f& sun_direction) {
+  auto sky     = texture_data{width, height, {}};
+  auto sun     = normalize(sun_direction);
+  auto zenith  = vec3f{0.25f, 0.45f, 0.95f};
+  auto horizon = vec3f{1.0f, 0.95f, 0.85f};
+  auto ground  = vec3f{0.22f, 0.2f, 0.18f};
+  sky.pixels.reserve((size_t)width * height);
+  for (auto j = 0; j < height; j++) {
+    for (auto i = 0; i < width; i++) {
+      auto w = equirect_to_direction({(i + 0.5f) / width, (j + 0.5f) / height});
+      auto c = w.y >= 0 ? horizon + (zenith - horizon) * std::pow(w.y, 0.4f)
+                        : ground + (horizon - ground) * std::exp(8 * w.y);
+      auto cos_sun = std::max(dot(w, sun), 0.0f);
+      c += vec3f{1.0f, 0.9f, 0.75f} * (40 * std::pow(cos_sun, 600.0f) + 0.6f * std::pow(cos_sun, 8.0f));
+      sky.pixels.push_back(c);
+    }
+  }
+  return sky;
+}
+
+scene_data make_hair_scene(const hair_style_params& params, const hair_material& hair) {
+  auto scene  = scene_data{};
+  auto camera = camera_data{};
+  auto sky_frame = identity3x4f;
+  switch (params.style) {
+    case hair_style::straight:
+    case hair_style::curly:
+      camera.frame  = lookat_frame({0, 15, 23}, {0, 9.5f, 0}, {0, 1, 0});
+      camera.aspect = 1;
+      camera.focus  = 24;
+      break;
+    case hair_style::curls:
+      camera.frame  = lookat_frame({-4, 5.9f, 20}, {-4, 5.9f, 0}, {0, 1, 0});
+      camera.aspect = 16.0f / 9.0f;
+      camera.focus  = 20;
+      break;
+    case hair_style::block:
+      // z up, as pbrt's hair block scene.
+      camera.frame  = lookat_frame({2, -3, 1.2f}, {1.25f, 0.3f, 0.5f}, {0, 0, 1});
+      camera.aspect = 2;
+      camera.lens   = 0.036f / 2 / std::tan(radians(23.0f) / 2) / 2;  // 23 deg vertical
+      camera.focus  = 3.6f;
+      sky_frame     = {{1, 0, 0}, {0, 0, 1}, {0, -1, 0}, {0, 0, 0}};
+      break;
+  }
+  scene.cameras.push_back(camera);
+  scene.camera_names.push_back("default");
+
+  scene.textures.push_back(make_sky_texture(512, 256, {-0.4f, 0.6f, 0.7f}));
+  scene.texture_names.push_back("sky");
+  scene.environments.push_back({sky_frame, {1, 1, 1}, 0});
+  scene.environment_names.push_back("sky");
+
+  scene.shapes.push_back(make_hair_strands(params));
+  scene.shape_names.push_back("hair");
+
+  auto add_material = [&](const std::string& name, const material_data& material) {
+    scene.materials.push_back(material);
+    scene.material_names.push_back(name);
+    return (int)scene.materials.size() - 1;
+  };
+  auto add_instance = [&](const std::string& name, const frame3f& frame, int shape, int material) {
+    scene.instances.push_back({frame, shape, material});
+    scene.instance_names.push_back(name);
+  };
+  auto hair_material_data = material_data{};
+  hair_material_data.type = material_type::hair;
+  hair_material_data.hair = hair;
+
+  if (params.style == hair_style::curls) {
+    // The thesis's four locks: black, red, brown and blonde.
+    struct lock {
+      const char* name;
+      float       eumelanin, pheomelanin, x;
+    };
+    for (auto [name, eumelanin, pheomelanin, x] :
+        {lock{"black", 8, 0, -3.75f}, lock{"red", 0, 2, -1.25f}, lock{"brown", 1.3f, 0, 1.25f},
+            lock{"blonde", 0.3f, 0, 3.75f}}) {
+      auto material              = hair_material_data;
+      material.hair.has_sigma_a  = false;
+      material.hair.has_color    = false;
+      material.hair.eumelanin    = eumelanin;
+      material.hair.pheomelanin  = pheomelanin;
+      add_instance(name, translation_frame({x, 0, 0}), 0, add_material(name, material));
+    }
+    return scene;
+  }
+  add_instance("hair", identity3x4f, 0, add_material("hair", hair_material_data));
+  auto solid = material_data{};
+  if (params.style == hair_style::block) {
+    solid.color = {0.2f, 0.8f, 0.3f};
+    scene.shapes.push_back(make_sphere_shape(96, 0.5f));
+    scene.shape_names.push_back("sphere");
+    add_instance("sphere", translation_frame({2, 0.5f, 0.5f}), 1, add_material("sphere", solid));
+  } else {
+    solid.color = {0.35f, 0.25f, 0.2f};
+    scene.shapes.push_back(make_sphere_shape(128, hair_head_radius));
+    scene.shape_names.push_back("head");
+    add_instance("head", translation_frame(hair_head_center), 1, add_material("head", solid));
+  }
+  return scene;
+}
+
+}  // namespace yocto
+
+// -----------------------------------------------------------------------------
+// PBRT CURVES
+// -----------------------------------------------------------------------------
+namespace yocto {
+
+bool save_pbrt_curves(const std::string& filename, const shape_data& shape,
+    std::string& error) {
+  auto gzipped = filename.size() > 3 && filename.substr(filename.size() - 3) == ".gz";
+  auto temporary = filename + ".tmp";
+  auto file = gzopen(temporary.c_str(), gzipped ? "wb6" : "wbT");
+  if (!file) return error = filename + ": cannot open for writing", false;
+  auto ok   = true;
+  auto line = std::string{};
+  char buffer[512];
+  auto write = [&](const char* text, int size) {
+    if (ok && gzwrite(file, text, size) != size) ok = false;
+  };
+  auto header = std::string("# hair curves written by yocto-hair's generator\n");
+  write(header.data(), (int)header.size());
+  for (auto& curve : shape.curves) {
+    auto& p = shape.positions;
+    auto  r = [&](int i) { return shape.radius.empty() ? 0.0f : shape.radius[i]; };
+    auto size = std::snprintf(buffer, sizeof(buffer),
+        "Shape \"curve\" \"string type\" \"cylinder\" \"point3 P\" [ %.7g %.7g %.7g %.7g %.7g "
+        "%.7g %.7g %.7g %.7g %.7g %.7g %.7g ] \"float width0\" %.7g \"float width1\" %.7g\n",
+        p[curve.x].x, p[curve.x].y, p[curve.x].z, p[curve.y].x, p[curve.y].y, p[curve.y].z,
+        p[curve.z].x, p[curve.z].y, p[curve.z].z, p[curve.w].x, p[curve.w].y, p[curve.w].z,
+        2 * r(curve.x), 2 * r(curve.w));
+    write(buffer, size);
+  }
+  if (gzclose(file) != Z_OK) ok = false;
+  if (!ok || std::rename(temporary.c_str(), filename.c_str()) != 0) {
+    std::remove(temporary.c_str());
+    return error = filename + ": cannot write", false;
+  }
+  return true;
+}
+
+}  // namespace yocto

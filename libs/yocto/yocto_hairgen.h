@@ -1,0 +1,69 @@
+//
+// # Yocto/HairGen: procedural hair scenes
+//
+// Deterministic hair geometry in the styles of the thesis's scenes (straight
+// hair on a head-sized sphere, curly hair, a lock of curls, a block of
+// fibers) as chains of cubic Bezier segments with a radius tapering towards
+// the tip, and complete scenes around them with a procedural sky. The head
+// styles use the frame of Cem Yuksel's hair models (y up, scalp centred near
+// (0, 10, 0), about 12 units across), the lock of curls that of Bitterli's
+// hair-curl model (hanging from (-4, 11.5, 0)), the block pbrt's hair block
+// (the unit cube, fibers along z): stand-ins land where real scene files'
+// cameras expect the real geometry.
+//
+
+#ifndef YOCTO_HAIRGEN_H_
+#define YOCTO_HAIRGEN_H_
+
+#include <array>
+#include <string>
+
+#include "yocto_scene.h"
+
+// -----------------------------------------------------------------------------
+// HAIR GENERATION
+// -----------------------------------------------------------------------------
+namespace yocto {
+
+enum struct hair_style { straight, curly, curls, block };
+inline const auto hair_style_names = std::array<std::string, 4>{
+    "straight", "curly", "curls", "block"};
+
+struct hair_style_params {
+  hair_style style    = hair_style::straight;
+  int        strands  = 10000;
+  int        segments = 0;  // Bezier segments per strand, 0 for the style's default
+  float      radius   = 0;  // root radius, 0 for the style's default
+  uint64_t   seed     = 7;
+};
+
+// Strands as a curves shape: each strand is a chain of cubic Bezier segments
+// sharing end points, radius tapering from the root to 20% at the tip.
+shape_data make_hair_strands(const hair_style_params& params);
+
+// The sphere the head styles grow from (center and radius).
+inline const vec3f hair_head_center = {0, 10, 0};
+inline const float hair_head_radius = 5.2f;
+
+// A procedural sky (equirectangular, y up): a blue gradient above a warm
+// horizon, a darker ground and a soft sun, linear radiance around 1.
+texture_data make_sky_texture(int width, int height, const vec3f& sun_direction);
+
+// A complete scene: camera, sky environment, the strands with a hair
+// material, and the head sphere (head styles) or a floor (block).
+scene_data make_hair_scene(const hair_style_params& params, const hair_material& hair);
+
+// Converts a polyline of points into a chain of cubic Bezier segments
+// (uniform Catmull-Rom through the points, end tangents mirrored), appending
+// 3 (n - 1) + 1 vertices and n - 1 curves to the shape.
+void append_catmull_rom_strand(shape_data& shape, const std::vector<vec3f>& points,
+    float root_radius, float tip_radius);
+
+// Writes curves in pbrt's syntax (`Shape "curve"`, one per Bezier segment,
+// `point3 P` and widths as diameters) to .pbrt or gzip'd .pbrt.gz.
+bool save_pbrt_curves(const std::string& filename, const shape_data& shape,
+    std::string& error);
+
+}  // namespace yocto
+
+#endif
