@@ -436,8 +436,8 @@ static bool read_ply_rows(const std::string& filename, ply_cursor& cursor,
   return true;
 }
 
-bool load_shape(const std::string& filename, shape_data& shape, std::string& error) {
-  shape     = {};
+static bool load_ply_shape(
+    const std::string& filename, shape_data& shape, std::string& error) {
   auto data = std::string{};
   if (!load_binary(filename, data, error)) return false;
   auto cursor   = ply_cursor{data.data(), data.size()};
@@ -584,6 +584,13 @@ bool load_shape(const std::string& filename, shape_data& shape, std::string& err
     }
   }
   return true;
+}
+
+bool load_shape(const std::string& filename, shape_data& shape, std::string& error) {
+  shape = {};
+  if (load_ply_shape(filename, shape, error)) return true;
+  shape = {};  // nothing half-read escapes
+  return false;
 }
 
 // Appends a little-endian binary value.

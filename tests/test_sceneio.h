@@ -1,0 +1,63 @@
+//
+// Helpers shared by the sceneio tests: scratch directories and small files.
+//
+
+#ifndef YOCTO_TEST_SCENEIO_H_
+#define YOCTO_TEST_SCENEIO_H_
+
+#include <unistd.h>
+#include <yocto/yocto_sceneio.h>
+
+#include <algorithm>
+#include <filesystem>
+#include <fstream>
+#include <string>
+#include <vector>
+
+namespace yocto_test {
+
+// A fresh, empty directory for one test, removed when the test ends.
+struct scratch_directory {
+  std::string path = "";
+  explicit scratch_directory(const std::string& name) {
+    path = (std::filesystem::temp_directory_path() /
+            ("yocto-sceneio-" + std::to_string(getpid())) / name)
+               .string();
+    std::filesystem::remove_all(path);
+    std::filesystem::create_directories(path);
+  }
+  ~scratch_directory() {
+    auto ec = std::error_code{};
+    std::filesystem::remove_all(path, ec);
+  }
+  std::string file(const std::string& name) const { return path + "/" + name; }
+};
+
+inline void write_file(const std::string& filename, const std::string& contents) {
+  std::filesystem::create_directories(std::filesystem::path(filename).parent_path());
+  auto stream = std::ofstream(filename, std::ios::binary);
+  stream.write(contents.data(), (std::streamsize)contents.size());
+}
+
+inline std::string read_file(const std::string& filename) {
+  auto stream = std::ifstream(filename, std::ios::binary);
+  return std::string(std::istreambuf_iterator<char>(stream), {});
+}
+
+// Every file and directory under a directory, relative and sorted: what a
+// failed save must leave unchanged.
+inline std::vector<std::string> list_files(const std::string& directory) {
+  auto files = std::vector<std::string>{};
+  for (auto& entry : std::filesystem::recursive_directory_iterator(directory))
+    files.push_back(std::filesystem::relative(entry.path(), directory).string());
+  std::sort(files.begin(), files.end());
+  return files;
+}
+
+inline bool contains(const std::string& text, const std::string& part) {
+  return text.find(part) != std::string::npos;
+}
+
+}  // namespace yocto_test
+
+#endif
