@@ -8,6 +8,7 @@
 
 #include "yocto_hair.h"
 
+#include <array>
 #include <cstdint>
 
 // -----------------------------------------------------------------------------
@@ -33,27 +34,55 @@ vec2f demux_hair_sample(float u) {
   return {compact_1by1(bits) / 65536.0f, compact_1by1(bits >> 1) / 65536.0f};
 }
 
+// Coefficients of the two expansions of I_0 used below, built at compile
+// time: 1 / (k!)^2 for the power series in x^2/4 (A&S 9.6.12), and
+// ((2k-1)!!)^2 / (k! 8^k) for the asymptotic series in 1/x (A&S 9.7.1).
+template <int n>
+static constexpr std::array<double, n> make_i0_series() {
+  auto coefficients = std::array<double, n>{};
+  auto c            = 1.0;
+  for (auto k = 0; k < n; k++) {
+    if (k > 0) c /= (double)k * k;
+    coefficients[k] = c;
+  }
+  return coefficients;
+}
+template <int n>
+static constexpr std::array<double, n> make_i0_asymptotic() {
+  auto coefficients = std::array<double, n>{};
+  auto c            = 1.0;
+  for (auto k = 0; k < n; k++) {
+    if (k > 0) c *= (2.0 * k - 1) * (2.0 * k - 1) / (8.0 * k);
+    coefficients[k] = c;
+  }
+  return coefficients;
+}
+// Below x = 12 the series' 24 terms leave a relative error under 1e-12
+// (below x = 3, 12 terms leave under 1e-10); from 12 on the asymptotic terms
+// keep shrinking until k ~ 2x, and 15 of them leave under 1e-10.
+static constexpr auto i0_series     = make_i0_series<24>();
+static constexpr auto i0_asymptotic = make_i0_asymptotic<15>();
+
 float hair_bessel_i0e(float x_) {
-  // Computed in double, so that the float result is correctly rounded or
-  // nearly so. Below 12 the power series sum_k (x^2/4)^k / (k!)^2 (A&S 9.6.12)
-  // has positive terms; 22 terms leave a relative error under 1e-12 at x = 12.
-  // Above, the asymptotic expansion (A&S 9.7.1)
-  // I_0(x) e^-x sqrt(2 pi x) = sum_k ((2k-1)!!)^2 / (k! (8x)^k),
-  // whose terms keep shrinking until k ~ 2x; 14 terms leave < 1e-10 at x = 12.
+  // In double with positive terms only, so that the float result is within
+  // rounding of the exact value.
   auto x = std::abs((double)x_);
   if (!(x < 1e30)) return 0;  // huge (I_0 e^-x -> 0) or NaN
   if (x < 12) {
-    auto q = x * x / 4, term = 1.0, sum = 1.0;
-    for (auto k = 1; k <= 22; k++) {
-      term *= q / ((double)k * k);
-      sum += term;
+    // Horner's rule in q^2 on the even and odd terms: two independent
+    // chains of half the length, as the loop is latency bound.
+    auto q = x * x / 4, q2 = q * q, even = 0.0, odd = 0.0;
+    auto n = x < 3 ? 12 : (int)i0_series.size();
+    for (auto k = n - 2; k >= 0; k -= 2) {
+      even = even * q2 + i0_series[k];
+      odd  = odd * q2 + i0_series[k + 1];
     }
-    return (float)(sum * std::exp(-x));
+    return (float)((even + q * odd) * std::exp(-x));
   } else {
-    auto term = 1.0, sum = 1.0;
-    for (auto k = 1; k <= 14; k++) {
-      term *= (2.0 * k - 1) * (2.0 * k - 1) / (8.0 * k * x);
-      sum += term;
+    // I_0(x) e^-x sqrt(2 pi x) = sum_k c_k / x^k.
+    auto y = 1 / x, sum = 0.0;
+    for (auto k = (int)i0_asymptotic.size() - 1; k >= 0; k--) {
+      sum = sum * y + i0_asymptotic[k];
     }
     return (float)(sum / std::sqrt(2 * 3.14159265358979323846 * x));
   }
@@ -203,21 +232,27 @@ hair_brdf eval_hair_brdf(
 // -----------------------------------------------------------------------------
 namespace yocto {
 
-// A direction in the fiber frame: longitudinal angle (sin, cos >= 0) and
-// azimuth phi = atan2(z, y).
+// A direction in the fiber frame: longitudinal angle (sin, cos >= 0) and the
+// components (y, z) in the normal plane, whose angle is the azimuth phi.
 struct hair_angles {
-  float sin_theta = 0, cos_theta = 1, phi = 0;
+  float sin_theta = 0, cos_theta = 1, y = 1, z = 0;
 };
 
 static hair_angles make_angles(const hair_brdf& brdf, const vec3f& w) {
-  auto wx = dot(w, brdf.x), wy = dot(w, brdf.y), wz = dot(w, brdf.z);
+  auto angles = hair_angles{};
+  angles.y    = dot(w, brdf.y);
+  angles.z    = dot(w, brdf.z);
   // cos(theta) from the normal-plane components stays accurate at grazing
   // angles, where sqrt(1 - sin^2) would not.
-  auto angles      = hair_angles{};
-  angles.sin_theta = std::clamp(wx, -1.0f, 1.0f);
-  angles.cos_theta = std::min(std::sqrt(wy * wy + wz * wz), 1.0f);
-  angles.phi       = std::atan2(wz, wy);
+  angles.sin_theta = std::clamp(dot(w, brdf.x), -1.0f, 1.0f);
+  angles.cos_theta = std::min(std::sqrt(sqr(angles.y) + sqr(angles.z)), 1.0f);
   return angles;
+}
+
+// phi_i - phi_o with a single arc tangent: the angle between the normal-plane
+// projections.
+static float relative_phi(const hair_angles& wo, const hair_angles& wi) {
+  return std::atan2(wo.y * wi.z - wo.z * wi.y, wo.y * wi.y + wo.z * wi.z);
 }
 
 // Terms that depend on theta_o (and the hit): attenuations A_p, lobe pdfs
@@ -341,7 +376,7 @@ vec3f eval_hair_scattering(
   auto  wo    = make_angles(brdf, outgoing);
   auto  wi    = make_angles(brdf, incoming);
   auto  lobes = make_lobes(brdf, wo);
-  auto  phi   = wi.phi - wo.phi;
+  auto  phi   = relative_phi(wo, wi);
 
   // hair.pdf eq. 3 is f = sum_p M_p A_p N_p / |cos theta_i|; the tracer
   // needs f times the cosine, so the sum itself is returned.
@@ -364,7 +399,7 @@ float sample_hair_scattering_pdf(
   auto  wo    = make_angles(brdf, outgoing);
   auto  wi    = make_angles(brdf, incoming);
   auto  lobes = make_lobes(brdf, wo);
-  auto  phi   = wi.phi - wo.phi;
+  auto  phi   = relative_phi(wo, wi);
 
   // Same lobes as eval, weighted by the lobe choice instead of A_p.
   auto pdf = 0.0f;
@@ -385,7 +420,11 @@ float sample_hair_scattering_pdf(
 
 vec3f sample_hair_scattering(
     const hair_brdf& brdf, const vec3f& outgoing, const vec2f& rn) {
-  auto u0 = demux_hair_sample(rn.x), u1 = demux_hair_sample(rn.y);
+  // Each demuxed value k / 2^16 stands for the cell [k, k + 1) / 2^16: take
+  // its centre, so that a zero never reaches the inverse CDFs, whose limits
+  // at 0 are the far ends of the lobes (t = 2, phi = -pi).
+  auto half = vec2f{0.5f / 65536, 0.5f / 65536};
+  auto u0 = demux_hair_sample(rn.x) + half, u1 = demux_hair_sample(rn.y) + half;
   return sample_hair_scattering(brdf, outgoing, vec4f{u0.x, u0.y, u1.x, u1.y});
 }
 
@@ -423,9 +462,18 @@ vec3f sample_hair_scattering(
   // Azimuth: Phi(p, h) plus a trimmed logistic sample; uniform for p_max.
   auto dphi = p < 3 ? lobes.phi_shift[p] + sample_azimuthal(mat, rn.y)
                     : 2 * pif * rn.y;
-  auto phi_i = wo.phi + dphi;
-  return brdf.x * sin_theta_i + brdf.y * (cos_theta_i * std::cos(phi_i)) +
-         brdf.z * (cos_theta_i * std::sin(phi_i));
+  // phi_i = phi_o + dphi as a rotation of the outgoing normal-plane direction
+  // (any direction if the outgoing one runs along the fiber).
+  auto cos_phi_o = 1.0f, sin_phi_o = 0.0f;
+  if (wo.cos_theta > 0) {
+    cos_phi_o = wo.y / wo.cos_theta;
+    sin_phi_o = wo.z / wo.cos_theta;
+  }
+  auto cos_dphi = std::cos(dphi), sin_dphi = std::sin(dphi);
+  auto cos_phi_i = cos_phi_o * cos_dphi - sin_phi_o * sin_dphi;
+  auto sin_phi_i = sin_phi_o * cos_dphi + cos_phi_o * sin_dphi;
+  return brdf.x * sin_theta_i + brdf.y * (cos_theta_i * cos_phi_i) +
+         brdf.z * (cos_theta_i * sin_phi_i);
 }
 
 }  // namespace yocto

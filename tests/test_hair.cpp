@@ -1,0 +1,497 @@
+//
+// Tests of the hair scattering model's building blocks: the Bessel function,
+// the longitudinal lobe's normalisation, pigments, the Morton demux, the
+// wiring of h and the frame, and the hard numerical cases. The statistical
+// tests of the full BSDF are in test_hair_sampling.cpp.
+//
+
+#include <gtest/gtest.h>
+#include <yocto/yocto_sampling.h>
+#include <yocto_hair/yocto_hair.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <functional>
+#include <vector>
+
+using namespace yocto;
+
+// -----------------------------------------------------------------------------
+// DETERMINISTIC QUADRATURE
+// -----------------------------------------------------------------------------
+
+// Gauss-Legendre nodes and weights on [-1, 1] by Newton's method on P_n.
+struct gauss_rule {
+  std::vector<double> nodes, weights;
+};
+static gauss_rule make_gauss_rule(int n) {
+  auto rule = gauss_rule{std::vector<double>(n), std::vector<double>(n)};
+  for (auto i = 0; i < n; i++) {
+    auto x = std::cos(3.14159265358979323846 * (i + 0.75) / (n + 0.5));
+    auto derivative = 0.0;
+    for (auto iteration = 0; iteration < 100; iteration++) {
+      auto p0 = 1.0, p1 = x;  // P_0, P_1, then the three-term recurrence
+      for (auto k = 2; k <= n; k++) {
+        auto p2 = ((2 * k - 1) * x * p1 - (k - 1) * p0) / k;
+        p0 = p1, p1 = p2;
+      }
+      auto pn    = n == 1 ? x : p1;
+      auto pn_1  = n == 1 ? 1.0 : p0;
+      derivative = n * (x * pn - pn_1) / (x * x - 1);
+      auto step  = pn / derivative;
+      x -= step;
+      if (std::abs(step) < 1e-15) break;
+    }
+    rule.nodes[i]   = x;
+    rule.weights[i] = 2 / ((1 - x * x) * derivative * derivative);
+  }
+  return rule;
+}
+
+// Composite Gauss-Legendre (8 nodes) over the panels between sorted breaks.
+static double integrate_panels(
+    std::vector<double> breaks, const std::function<double(double)>& f) {
+  static const auto rule = make_gauss_rule(8);
+  std::sort(breaks.begin(), breaks.end());
+  auto sum = 0.0;
+  for (auto i = 0; i + 1 < (int)breaks.size(); i++) {
+    auto a = breaks[i], b = breaks[i + 1];
+    if (b - a < 1e-12) continue;
+    for (auto k = 0; k < (int)rule.nodes.size(); k++) {
+      sum += rule.weights[k] * (b - a) / 2 * f((a + b) / 2 + rule.nodes[k] * (b - a) / 2);
+    }
+  }
+  return sum;
+}
+
+// Breaks around a peak at center of width w: center +- w {1/2, 1, 2, 4, ...}
+// inside [lo, hi]; periodic (wrapped into [lo, hi]) if asked.
+static void add_lobe_breaks(std::vector<double>& breaks, double center,
+    double width, double lo, double hi, bool periodic = false) {
+  auto period = hi - lo;
+  auto place  = [&](double x) {
+    if (periodic) x = lo + std::fmod(std::fmod(x - lo, period) + period, period);
+    if (x > lo && x < hi) breaks.push_back(x);
+  };
+  place(center);
+  for (auto k = 0.5; k * width < period; k *= 2) {
+    place(center - k * width);
+    place(center + k * width);
+  }
+}
+
+// -----------------------------------------------------------------------------
+// BESSEL FUNCTION AND LONGITUDINAL LOBE
+// -----------------------------------------------------------------------------
+
+// Reference I_0(x) e^-x from the integral (1/pi) int_0^pi e^{x (cos t - 1)} dt
+// by the trapezoidal rule in long double: for a periodic analytic integrand
+// the error falls like I_{2n}(x) / I_0(x) ~ exp(-(2n)^2 / 2x), far below
+// 1e-18 with n = 6000 for every x up to 1e5.
+static long double reference_i0e(long double x) {
+  const int n   = 6000;
+  auto      sum = (1.0L + std::exp(-2 * x)) / 2;
+  for (auto k = 1; k < n; k++) {
+    sum += std::exp(x * (std::cos(k * 3.14159265358979323846264L / n) - 1));
+  }
+  return sum / n;
+}
+
+TEST(hair, bessel_i0e_float_precision) {
+  // 0, then 300 log-spaced points in [1e-4, 1e5] (M_p needs up to ~7e4 at
+  // beta_m = 0.01), and both sides of the series/asymptotic switch at 12.
+  auto xs = std::vector<float>{0, 11.999f, 12, 12.001f};
+  for (auto i = 0; i <= 300; i++) xs.push_back(1e-4f * std::pow(1e9f, i / 300.0f));
+  auto worst = 0.0, worst_x = 0.0;
+  for (auto x : xs) {
+    auto value     = (long double)hair_bessel_i0e(x);
+    auto reference = reference_i0e((long double)x);
+    auto error     = (double)std::abs(value / reference - 1);
+    if (error > worst) worst = error, worst_x = x;
+  }
+  // Float rounding alone is 6e-8 relative; allow one float epsilon.
+  std::printf("[ figure ] I0e worst relative error %.3g at x = %g\n", worst, worst_x);
+  RecordProperty("i0e_worst_relative_error", std::to_string(worst));
+  EXPECT_LE(worst, 1.2e-7);
+  EXPECT_EQ(hair_bessel_i0e(0), 1.0f);
+  EXPECT_TRUE(std::isfinite(hair_bessel_i0e(1e30f)));
+}
+
+// Integral of M_p cos(theta_i) over theta_i for one variance and theta_o,
+// with panels refined around the peak at theta_i = -theta_o.
+static double integrate_longitudinal(float v, double theta_o) {
+  auto breaks = std::vector<double>{-pif / 2.0, pif / 2.0};
+  add_lobe_breaks(breaks, -theta_o, std::sqrt(v), -pif / 2.0, pif / 2.0);
+  auto sin_o = (float)std::sin(theta_o), cos_o = (float)std::cos(theta_o);
+  return integrate_panels(breaks, [&](double theta_i) {
+    auto m = eval_hair_longitudinal(v, (float)std::sin(theta_i),
+        (float)std::cos(theta_i), sin_o, cos_o);
+    return m * std::cos(theta_i);
+  });
+}
+
+TEST(hair, longitudinal_normalised) {
+  // beta_m from 0.01 to 1, all four variances, theta_o across the range:
+  // the integral of M_p cos(theta_i) must be 1. (pbrt's I_0 leaves it as low
+  // as 0.987.) Deterministic quadrature; tolerance 1e-4.
+  auto betas = std::vector<float>{0.01f, 0.02f, 0.05f, 0.1f, 0.2f, 0.3f, 0.4f,
+      0.5f, 0.6f, 0.7f, 0.8f, 0.9f, 1.0f};
+  auto thetas = std::vector<double>{-1.5, -0.9, -0.3, 0.0, 0.2, 0.8, 1.2, 1.55};
+  auto worst  = 0.0;
+  for (auto beta_m : betas) {
+    auto material   = hair_material{};
+    material.beta_m = beta_m;
+    auto pre        = make_hair_precomputed(material);
+    for (auto p = 0; p < 4; p++) {
+      for (auto theta_o : thetas) {
+        auto integral = integrate_longitudinal(pre.v[p], theta_o);
+        worst         = std::max(worst, std::abs(integral - 1));
+        EXPECT_NEAR(integral, 1, 1e-4)
+            << "beta_m " << beta_m << " p " << p << " theta_o " << theta_o;
+      }
+    }
+  }
+  std::printf("[ figure ] M_p normalisation worst |integral - 1| = %.3g\n", worst);
+  RecordProperty("mp_worst_deviation", std::to_string(worst));
+}
+
+TEST(hair, longitudinal_peak_accurate_at_low_roughness) {
+  // At v = 1.35e-5 (TT lobe, beta_m = 0.01) the exponent's terms are ~7e4
+  // each; with the analytic cancellation the float value at points around
+  // the peak must match a long double evaluation of the textbook formula
+  // to 1e-4 relative.
+  auto material   = hair_material{};
+  material.beta_m = 0.01f;
+  auto v          = make_hair_precomputed(material).v[1];
+  auto theta_o    = 0.4f;
+  auto worst      = 0.0;
+  for (auto k = -6; k <= 6; k++) {
+    auto theta_i = -theta_o + k * 0.5f * std::sqrt(v);
+    auto sin_i = std::sin(theta_i), cos_i = std::cos(theta_i);
+    auto sin_o = std::sin(theta_o), cos_o = std::cos(theta_o);
+    auto value = eval_hair_longitudinal(v, sin_i, cos_i, sin_o, cos_o);
+    // The reference sees exactly the same float inputs.
+    auto lv = (long double)v;
+    auto ti = std::atan2((long double)sin_i, (long double)cos_i);
+    auto to = std::atan2((long double)sin_o, (long double)cos_o);
+    // log M = log(1 / (v (1 - e^{-2/v}))) - (1 - cos(ti + to)) / v + log I0e(a)
+    auto a         = (long double)cos_i * cos_o / lv;
+    auto log_m     = -std::log(lv * -std::expm1(-2 / lv)) -
+                 (1 - std::cos(ti + to)) / lv + std::log(reference_i0e(a));
+    auto reference = std::exp(log_m);
+    worst = std::max(worst, (double)std::abs(value / reference - 1));
+  }
+  std::printf("[ figure ] M_p at beta_m = 0.01 worst relative error %.3g\n", worst);
+  EXPECT_LE(worst, 1e-4);
+}
+
+// -----------------------------------------------------------------------------
+// PIGMENTS AND DEMUX
+// -----------------------------------------------------------------------------
+
+TEST(hair, sigma_a_from_melanin) {
+  // By hand: 1.3 (0.419, 0.697, 1.37); 0.5 (0.419, 0.697, 1.37) + 2 (0.187,
+  // 0.4, 1.05).
+  auto a = hair_sigma_a_from_melanin(1.3f, 0);
+  EXPECT_NEAR(a.x, 0.5447f, 1e-6f);
+  EXPECT_NEAR(a.y, 0.9061f, 1e-6f);
+  EXPECT_NEAR(a.z, 1.781f, 1e-6f);
+  auto b = hair_sigma_a_from_melanin(0.5f, 2);
+  EXPECT_NEAR(b.x, 0.5835f, 1e-6f);
+  EXPECT_NEAR(b.y, 1.1485f, 1e-6f);
+  EXPECT_NEAR(b.z, 2.785f, 1e-6f);
+  auto c = hair_sigma_a_from_melanin(-1, -1);
+  EXPECT_EQ(c, vec3f(0, 0, 0));
+}
+
+TEST(hair, sigma_a_from_color) {
+  // By hand: at beta_n = 0.3 the denominator is 5.969 - 0.0645 + 0.22788 -
+  // 0.28971 + 0.04514894 + 0.00059535 = 5.88841475; sigma_a = (ln c / it)^2.
+  auto a = hair_sigma_a_from_color({0.5f, 0.25f, 0.9f}, 0.3f);
+  EXPECT_NEAR(a.x, 0.0138565189f, 1e-7f);
+  EXPECT_NEAR(a.y, 0.0554260756f, 1e-7f);
+  EXPECT_NEAR(a.z, 0.000320154f, 1e-8f);
+  // At beta_n = 1 the denominator is 3.375: (ln 0.5 / 3.375)^2; colour 0 is
+  // clamped to 1e-4: (ln 1e-4 / 3.375)^2; white absorbs nothing.
+  auto b = hair_sigma_a_from_color({0.5f, 0, 1}, 1);
+  EXPECT_NEAR(b.x, 0.0421796885f, 1e-7f);
+  EXPECT_NEAR(b.y, 7.447385f, 1e-5f);
+  EXPECT_EQ(b.z, 0.0f);
+}
+
+TEST(hair, material_precedence) {
+  auto material    = hair_material{};  // no colouring: eumelanin 1.3
+  auto pre         = make_hair_precomputed(material);
+  EXPECT_NEAR(pre.sigma_a.x, 0.5447f, 1e-6f);
+  material.has_color = true;
+  material.color     = {0.5f, 0.5f, 0.5f};
+  material.beta_n    = 1;
+  EXPECT_NEAR(make_hair_precomputed(material).sigma_a.y, 0.0421796885f, 1e-7f);
+  material.has_sigma_a = true;
+  material.sigma_a     = {0.1f, 0.2f, 0.3f};
+  EXPECT_EQ(make_hair_precomputed(material).sigma_a, vec3f(0.1f, 0.2f, 0.3f));
+  // Roughness is clamped to [0.01, 1].
+  material.beta_m = 0;
+  material.beta_n = 7;
+  pre             = make_hair_precomputed(material);
+  EXPECT_EQ(pre.beta_m, 0.01f);
+  EXPECT_EQ(pre.beta_n, 1.0f);
+  EXPECT_GT(pre.v[0], 0.0f);
+}
+
+TEST(hair, demux_hand_worked_bits) {
+  // u = 0.75: bits 1100 0..., bit 31 (odd) -> second bit 15, bit 30 (even) ->
+  // first bit 15: (0.5, 0.5).
+  EXPECT_EQ(demux_hair_sample(0.75f), vec2f(0.5f, 0.5f));
+  EXPECT_EQ(demux_hair_sample(0.5f), vec2f(0.0f, 0.5f));   // bit 31 only
+  EXPECT_EQ(demux_hair_sample(0.25f), vec2f(0.5f, 0.0f));  // bit 30 only
+  EXPECT_EQ(demux_hair_sample(0.0f), vec2f(0.0f, 0.0f));
+  // u = 0x9C / 256 = 0.609375: bits 31..24 = 1 0 0 1 1 1 0 0. Odd bits
+  // 31, 29, 27, 25 = 1 0 1 0 -> second = 0xA000 / 65536 = 0.625; even bits
+  // 30, 28, 26, 24 = 0 1 1 0 -> first = 0x6000 / 65536 = 0.375.
+  EXPECT_EQ(demux_hair_sample(0.609375f), vec2f(0.375f, 0.625f));
+  // u = 0xAAAAAA00 / 2^32: odd bits 9..31 set -> second bits 4..15 = 0xFFF0.
+  EXPECT_EQ(demux_hair_sample(0xAAAAAA00u / 4294967296.0f),
+      vec2f(0.0f, 0xFFF0 / 65536.0f));
+  // u = 0x55555500 / 2^32: even bits 8..30 set -> first bits 4..15 = 0xFFF0.
+  EXPECT_EQ(demux_hair_sample(0x55555500u / 4294967296.0f),
+      vec2f(0xFFF0 / 65536.0f, 0.0f));
+  // u = 0xFFFF0000 / 2^32: bits 16..31 -> both get bits 8..15 = 0xFF00.
+  EXPECT_EQ(demux_hair_sample(0xFFFF0000u / 4294967296.0f),
+      vec2f(0xFF00 / 65536.0f, 0xFF00 / 65536.0f));
+  // Out of range inputs stay in [0, 1).
+  auto one = demux_hair_sample(1.0f);
+  EXPECT_LT(one.x, 1.0f);
+  EXPECT_LT(one.y, 1.0f);
+}
+
+// -----------------------------------------------------------------------------
+// FRAME AND H WIRING
+// -----------------------------------------------------------------------------
+
+TEST(hair, low_roughness_r_lobe_is_mirror_of_cylinder) {
+  // A straight fiber along x of radius 0.5 through the origin, a ray along d
+  // passing the axis at offset h along y (the frame the tracer builds: x the
+  // tangent, z = -d without its tangent part, y = z × x). With beta = 0.01,
+  // alpha = 0 and sigma_a = 1e4 only R survives; its samples (2000, fixed
+  // seed) must lie within 0.05 rad of the mirror reflection off the
+  // cylinder's surface normal at the hit, on average within 0.02 rad.
+  auto material        = hair_material{};
+  material.beta_m      = 0.01f;
+  material.beta_n      = 0.01f;
+  material.alpha       = 0;
+  material.has_sigma_a = true;
+  material.sigma_a     = {1e4f, 1e4f, 1e4f};
+  auto radius          = 0.5f;
+  auto rng             = make_rng(7);
+  for (auto h : {-0.9f, -0.4f, 0.0f, 0.3f, 0.8f}) {
+    for (auto d : {vec3f{0.3f, 0.2f, -1}, vec3f{-0.5f, -1, 0.4f}}) {
+      d         = normalize(d);
+      auto x    = vec3f{1, 0, 0};
+      auto z    = normalize(-d - dot(-d, x) * x);
+      auto y    = cross(z, x);
+      auto axis = vec3f{0.7f, 0, 0};
+      // First hit of the ray with the cylinder: offset h r along y, on the
+      // side facing the ray; the surface normal points from the axis to it.
+      auto hit    = axis + radius * (h * y + std::sqrt(1 - h * h) * z);
+      auto normal = normalize(hit - axis);
+      auto mirror = reflect(-d, normal);
+      // h as the tracer computes it from the geometry.
+      auto h_geometry = dot(hit - axis, y) / radius;
+      auto brdf       = eval_hair_brdf(material, h_geometry, frame3f{x, y, z, {}});
+      auto mean_angle = 0.0;
+      for (auto i = 0; i < 2000; i++) {
+        auto wi    = sample_hair_scattering(brdf, -d, rand2f(rng));
+        auto angle = std::acos(std::clamp(dot(wi, mirror), -1.0f, 1.0f));
+        EXPECT_LT(angle, 0.05f) << "h " << h;
+        mean_angle += angle / 2000;
+      }
+      EXPECT_LT(mean_angle, 0.02) << "h " << h;
+      // And the lobe really is there: eval at the mirror beats eval at the
+      // mirror of the opposite offset.
+      auto other = reflect(-d, normalize(-h * y + std::sqrt(1 - h * h) * z));
+      if (h != 0) {
+        EXPECT_GT(eval_hair_scattering(brdf, -d, mirror).x,
+            100 * eval_hair_scattering(brdf, -d, other).x);
+      }
+    }
+  }
+}
+
+// -----------------------------------------------------------------------------
+// HARD CASES
+// -----------------------------------------------------------------------------
+
+// Directions including grazing ones along the fiber (|w.x| -> 1).
+static vec3f hard_direction(rng_state& rng) {
+  auto kind = rand1i(rng, 4);
+  auto w    = sample_sphere(rand2f(rng));
+  if (kind == 0) return w;
+  auto sign = rand1f(rng) < 0.5f ? -1.0f : 1.0f;
+  if (kind == 1) return {sign, 0, 0};  // exactly along the fiber
+  auto tiny = std::pow(10.0f, -1 - 7 * rand1f(rng));
+  auto phi  = 2 * pif * rand1f(rng);
+  auto side = vec3f{0, std::cos(phi), std::sin(phi)};
+  return normalize(vec3f{sign, 0, 0} + tiny * side);
+}
+
+TEST(hair, hard_cases_finite_and_consistent) {
+  // 10^6 random evaluations (eval and pdf of a random pair, plus a sample and
+  // its eval and pdf) over beta in {0.01, 0 (clamped), 0.3, 1}, h in {-1, 0,
+  // 1, random}, sigma_a in {0, 0.5, 1e4}, alpha in {0, 10} degrees, eta in
+  // {1.0001, 1.55, 2}, and grazing directions. No NaN, Inf or negative value;
+  // pdf > 0 wherever eval > 0. Fixed seed.
+  auto rng      = make_rng(1234);
+  auto betas    = std::vector<float>{0.01f, 0.0f, 0.3f, 1.0f};
+  auto hs       = std::vector<float>{-1, 0, 1, 0.5f};
+  auto sigmas   = std::vector<float>{0, 0.5f, 1e4f};
+  auto alphas   = std::vector<float>{0, 10};
+  auto etas     = std::vector<float>{1.0001f, 1.55f, 2};
+  auto failures = 0, evaluations = 1000000;
+  auto nonzero  = 0;
+  for (auto i = 0; i < evaluations / 2 && failures < 10; i++) {
+    auto material        = hair_material{};
+    material.beta_m      = betas[rand1i(rng, 4)];
+    material.beta_n      = betas[rand1i(rng, 4)];
+    material.alpha       = alphas[rand1i(rng, 2)];
+    material.eta         = etas[rand1i(rng, 3)];
+    material.has_sigma_a = true;
+    material.sigma_a     = vec3f{1, 1, 1} * sigmas[rand1i(rng, 3)];
+    auto h = hs[rand1i(rng, 4)];
+    if (h == 0.5f) h = 2 * rand1f(rng) - 1;
+    auto frame = frame_fromz({0, 0, 0}, sample_sphere(rand2f(rng)));
+    auto brdf  = eval_hair_brdf(material, h, frame);
+    auto wo    = transform_direction(frame, hard_direction(rng));
+    auto wi    = transform_direction(frame, hard_direction(rng));
+    auto check = [&](const vec3f& wi, const char* what) {
+      auto f   = eval_hair_scattering(brdf, wo, wi);
+      auto pdf = sample_hair_scattering_pdf(brdf, wo, wi);
+      auto ok  = isfinite(f) && std::isfinite(pdf) && min_component(f) >= 0 &&
+                pdf >= 0 && (max_component(f) == 0 || pdf > 0);
+      if (max_component(f) > 0) nonzero++;
+      if (!ok && failures++ < 10) {
+        ADD_FAILURE() << what << ": f " << f.x << " " << f.y << " " << f.z
+                      << " pdf " << pdf << " beta " << material.beta_m << " "
+                      << material.beta_n << " h " << h << " sigma_a "
+                      << material.sigma_a.x << " eta " << material.eta
+                      << " alpha " << material.alpha << " wo.x "
+                      << dot(wo, frame.x) << " wi.x " << dot(wi, frame.x);
+      }
+    };
+    check(wi, "random pair");
+    auto ws = sample_hair_scattering(brdf, wo, rand2f(rng));
+    if (!isfinite(ws) || std::abs(length(ws) - 1) > 1e-3f) {
+      if (failures++ < 10) ADD_FAILURE() << "bad sampled direction";
+      continue;
+    }
+    check(ws, "sampled");
+  }
+  std::printf("[ figure ] hard cases: %d evaluations, %d non-zero, %d failures\n",
+      evaluations, nonzero, failures);
+  EXPECT_EQ(failures, 0);
+  EXPECT_GT(nonzero, evaluations / 4);  // the check is not vacuous
+}
+
+// -----------------------------------------------------------------------------
+// FURNACES AND SAMPLING
+// -----------------------------------------------------------------------------
+
+// A white fiber (sigma_a = 0) of the given roughness, default alpha and eta.
+static hair_material white_material(float beta_m, float beta_n, float alpha = 2) {
+  auto material        = hair_material{};
+  material.beta_m      = beta_m;
+  material.beta_n      = beta_n;
+  material.alpha       = alpha;
+  material.has_sigma_a = true;
+  material.sigma_a     = {0, 0, 0};
+  return material;
+}
+
+// Local direction from theta and phi (x = sin theta, phi = atan2(z, y)).
+static vec3f local_direction(double theta, double phi) {
+  return {(float)std::sin(theta), (float)(std::cos(theta) * std::cos(phi)),
+      (float)(std::cos(theta) * std::sin(phi))};
+}
+
+TEST(hair, white_furnace_uniform_sampling) {
+  // sigma_a = 0, beta_m, beta_n in {.1, .3, .5, .7, .9}: the cosine-weighted
+  // BSDF integrates to 1. Monte Carlo with uniform directions and a random h
+  // per sample, 300k samples per pair, fixed seed; tolerance 0.05 (pbrt-v3's).
+  auto worst = 0.0;
+  auto rng   = make_rng(42);
+  for (auto beta_m : {.1f, .3f, .5f, .7f, .9f}) {
+    for (auto beta_n : {.1f, .3f, .5f, .7f, .9f}) {
+      auto pre = make_hair_precomputed(white_material(beta_m, beta_n));
+      auto sum = 0.0;
+      const auto samples = 300000;
+      for (auto i = 0; i < samples; i++) {
+        auto brdf = eval_hair_brdf(pre, -1 + 2 * rand1f(rng), frame3f{});
+        auto wo   = sample_sphere(rand2f(rng));
+        auto wi   = sample_sphere(rand2f(rng));
+        sum += eval_hair_scattering(brdf, wo, wi).y / sample_sphere_pdf(wi);
+      }
+      auto average = sum / samples;
+      worst        = std::max(worst, std::abs(average - 1));
+      EXPECT_NEAR(average, 1, 0.05) << "beta_m " << beta_m << " beta_n " << beta_n;
+    }
+  }
+  std::printf("[ figure ] uniform white furnace worst |E - 1| = %.4f\n", worst);
+  RecordProperty("uniform_furnace_worst", std::to_string(worst));
+}
+
+TEST(hair, white_furnace_quadrature) {
+  // Deterministic: integral of eval over theta_i and phi with composite
+  // Gauss-Legendre panels refined around every lobe (8 nodes per panel),
+  // for beta_m, beta_n in {0.02, 0.05, 0.1, 0.2, 0.4, 0.6, 0.8, 1}, theta_o in
+  // {-1.2, 0.1, 0.9} and h cycling through {-0.95, -0.3, 0.5, 0.99}.
+  // Tolerance 0.002.
+  auto betas  = std::vector<float>{0.02f, 0.05f, 0.1f, 0.2f, 0.4f, 0.6f, 0.8f, 1};
+  auto thetas = std::vector<double>{-1.2, 0.1, 0.9};
+  auto hs     = std::vector<float>{-0.95f, -0.3f, 0.5f, 0.99f};
+  auto worst  = 0.0;
+  auto count  = 0;
+  for (auto beta_m : betas) {
+    for (auto beta_n : betas) {
+      for (auto theta_o : thetas) {
+        auto h        = hs[count++ % hs.size()];
+        auto material = white_material(beta_m, beta_n);
+        auto pre      = make_hair_precomputed(material);
+        auto brdf     = eval_hair_brdf(pre, h, frame3f{});
+        auto wo       = local_direction(theta_o, pif / 2);
+        // Lobe centres in theta_i: minus the tilted theta_o of each lobe.
+        auto alpha   = (double)radians(material.alpha);
+        auto tilts   = std::vector<double>{-2 * alpha, alpha, 4 * alpha, 0};
+        auto breaks_theta = std::vector<double>{-pif / 2.0, pif / 2.0};
+        for (auto p = 0; p < 4; p++) {
+          auto t = theta_o + tilts[p];
+          auto c = std::atan2(std::sin(t), std::abs(std::cos(t)));
+          add_lobe_breaks(breaks_theta, -c, std::sqrt(pre.v[p]), -pif / 2.0, pif / 2.0);
+        }
+        // Lobe centres in phi: Phi(p, h), and the wrap-around kinks.
+        auto eta_p = std::sqrt(sqr((double)pre.eta) - sqr(std::sin(theta_o))) /
+                     std::cos(theta_o);
+        auto gamma_t    = std::asin(h / eta_p);
+        auto gamma_o    = std::asin((double)h);
+        auto breaks_phi = std::vector<double>{-pif, pif};
+        for (auto p = 0; p < 3; p++) {
+          auto center = 2 * p * gamma_t - 2 * gamma_o + p * pif;
+          add_lobe_breaks(breaks_phi, center, pre.s, -pif, pif, true);
+          // The wrapped logistic has a kink opposite its centre.
+          add_lobe_breaks(breaks_phi, center + pif, 2 * pif, -pif, pif, true);
+        }
+        auto integral = integrate_panels(breaks_theta, [&](double theta_i) {
+          return std::cos(theta_i) * integrate_panels(breaks_phi, [&](double phi) {
+            auto wi = local_direction(theta_i, pif / 2 + phi);
+            return (double)eval_hair_scattering(brdf, wo, wi).y;
+          });
+        });
+        worst = std::max(worst, std::abs(integral - 1));
+        EXPECT_NEAR(integral, 1, 0.002) << "beta_m " << beta_m << " beta_n "
+                                        << beta_n << " theta_o " << theta_o;
+      }
+    }
+  }
+  std::printf("[ figure ] quadrature white furnace worst |E - 1| = %.2g\n", worst);
+  RecordProperty("quadrature_furnace_worst", std::to_string(worst));
+}
