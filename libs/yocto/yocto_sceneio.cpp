@@ -720,14 +720,34 @@ static bool is_8bit_extension(const std::string& extension) {
   return extension == ".png" || extension == ".jpg" || extension == ".jpeg";
 }
 
+// OpenImageIO 2.4 reads PFM but cannot write it: the format is a short
+// header and raw little-endian floats, rows from the bottom up.
+static bool save_pfm(
+    const std::string& filename, const texture_data& image, std::string& error) {
+  auto data = "PF\n" + std::to_string(image.width) + " " + std::to_string(image.height) +
+              "\n-1.0\n";  // a negative scale means little-endian
+  data.reserve(data.size() + image.pixels.size() * 12);
+  for (auto j = image.height - 1; j >= 0; j--) {
+    for (auto i = 0; i < image.width; i++) {
+      auto& pixel = image.pixels[(size_t)j * image.width + i];
+      for (auto c = 0; c < 3; c++) append_raw(data, pixel[c]);
+    }
+  }
+  return save_binary(filename, data, error);
+}
+
 bool is_image_filename(const std::string& filename) {
   auto extension = path_extension(filename);
   return is_linear_extension(extension) || is_8bit_extension(extension);
 }
 
 bool load_image(const std::string& filename, texture_data& image, std::string& error) {
-  image      = {};
-  auto input = OIIO::ImageInput::open(filename);
+  image = {};
+  // Colours as stored: OpenImageIO would otherwise premultiply them by an
+  // alpha that we drop.
+  auto config = OIIO::ImageSpec{};
+  config.attribute("oiio:UnassociatedAlpha", 1);
+  auto input = OIIO::ImageInput::open(filename, &config);
   if (!input) {
     auto message = OIIO::geterror();
     error = filename + ": cannot open image" + (message.empty() ? "" : " (" + message + ")");
@@ -803,6 +823,7 @@ bool save_image(const std::string& filename, const texture_data& image,
     }
   }
 
+  if (extension == ".pfm") return save_pfm(filename, image, error);
   auto linear    = is_linear_extension(extension);
   auto temporary = make_temporary_filename(filename);
   auto output    = OIIO::ImageOutput::create(temporary);
