@@ -1,1 +1,2049 @@
-// yocto_pbrtio: implementation (in progress)
+//
+// Implementation of Yocto/PbrtIO.
+//
+// The pbrt reader tokenises each file from a memory buffer (plain files are
+// read whole, .gz files through zlib), keeps pbrt's graphics state (current
+// transform, material, area light) on a stack, and turns directives into scene
+// elements as they come. Curves are appended to one shape per (material,
+// transform), which is what keeps million-curve files fast.
+//
+
+#include "yocto_pbrtio.h"
+
+#include <zlib.h>
+
+#include <array>
+#include <charconv>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <filesystem>
+#include <map>
+#include <string_view>
+#include <unordered_map>
+#include <unordered_set>
+
+#include "yocto_sceneio.h"
+
+// -----------------------------------------------------------------------------
+// FILE READING
+// -----------------------------------------------------------------------------
+namespace yocto {
+
+static bool ends_with(std::string_view text, std::string_view suffix) {
+  return text.size() >= suffix.size() &&
+         text.substr(text.size() - suffix.size()) == suffix;
+}
+
+// Reads a whole file into memory; .gz files are inflated. A gzip stream that
+// ends early or fails its checksum is an error, never a silently short file.
+static bool read_whole_file(
+    const std::string& filename, std::string& data, std::string& error) {
+  data.clear();
+  if (ends_with(filename, ".gz")) {
+    auto file = gzopen(filename.c_str(), "rb");
+    if (!file) {
+      error = filename + ": cannot open file";
+      return false;
+    }
+    gzbuffer(file, 1 << 20);
+    const auto chunk = (size_t)1 << 22;
+    while (true) {
+      auto old_size = data.size();
+      data.resize(old_size + chunk);
+      auto count = gzread(file, data.data() + old_size, (unsigned)chunk);
+      if (count < 0) {
+        auto errnum  = 0;
+        auto message = std::string{gzerror(file, &errnum)};
+        gzclose_r(file);
+        error = filename + ": corrupt or truncated gzip data after " +
+                std::to_string(old_size) + " uncompressed bytes (" + message + ")";
+        data.clear();
+        return false;
+      }
+      data.resize(old_size + (size_t)count);
+      if (count == 0) break;
+    }
+    // gzclose_r reports Z_BUF_ERROR when the last read ended inside a stream.
+    if (gzclose_r(file) != Z_OK) {
+      error = filename + ": truncated gzip data after " +
+              std::to_string(data.size()) + " uncompressed bytes";
+      data.clear();
+      return false;
+    }
+    return true;
+  }
+  auto file = std::fopen(filename.c_str(), "rb");
+  if (!file) {
+    error = filename + ": cannot open file";
+    return false;
+  }
+  std::fseek(file, 0, SEEK_END);
+  auto size = std::ftell(file);
+  std::fseek(file, 0, SEEK_SET);
+  if (size < 0) {
+    std::fclose(file);
+    error = filename + ": cannot read file";
+    return false;
+  }
+  data.resize((size_t)size);
+  auto read = size > 0 ? std::fread(data.data(), 1, (size_t)size, file) : 0;
+  std::fclose(file);
+  if (read != (size_t)size) {
+    error = filename + ": cannot read file";
+    data.clear();
+    return false;
+  }
+  return true;
+}
+
+}  // namespace yocto
+
+// -----------------------------------------------------------------------------
+// TOKENIZER
+// -----------------------------------------------------------------------------
+namespace yocto {
+
+enum struct pbrt_token_kind { eof, word, string, number, open, close };
+
+// A token points into the file buffer; strings exclude their quotes.
+struct pbrt_token {
+  pbrt_token_kind  kind    = pbrt_token_kind::eof;
+  std::string_view text    = {};
+  int              line    = 0;
+  bool             escaped = false;  // string with backslash escapes
+};
+
+struct pbrt_lexer {
+  std::string filename = "";
+  std::string data     = "";
+  const char* ptr      = nullptr;
+  const char* end      = nullptr;
+  int         line     = 1;
+  pbrt_token  peeked   = {};
+  bool        has_peek = false;
+};
+
+static std::string token_description(const pbrt_token& token) {
+  switch (token.kind) {
+    case pbrt_token_kind::eof: return "end of file";
+    case pbrt_token_kind::open: return "[";
+    case pbrt_token_kind::close: return "]";
+    case pbrt_token_kind::string: return "\"" + std::string{token.text} + "\"";
+    default: return std::string{token.text};
+  }
+}
+
+static bool is_space(char c) {
+  return c == ' ' || c == '\t' || c == '\n' || c == '\r' || c == '\f' || c == '\v';
+}
+
+// Reads the next token; on a lexical error sets `error` (file and line).
+static bool lex_token(pbrt_lexer& lexer, pbrt_token& token, std::string& error) {
+  auto& ptr = lexer.ptr;
+  auto  end = lexer.end;
+  // Whitespace and # comments.
+  while (ptr < end) {
+    if (*ptr == '\n') {
+      lexer.line++;
+      ptr++;
+    } else if (is_space(*ptr)) {
+      ptr++;
+    } else if (*ptr == '#') {
+      while (ptr < end && *ptr != '\n') ptr++;
+    } else {
+      break;
+    }
+  }
+  token = {};
+  token.line = lexer.line;
+  if (ptr >= end) return true;
+  auto c = *ptr;
+  if (c == '[' || c == ']') {
+    token.kind = c == '[' ? pbrt_token_kind::open : pbrt_token_kind::close;
+    token.text = {ptr, 1};
+    ptr++;
+    return true;
+  }
+  if (c == '"') {
+    auto start = ++ptr;
+    while (ptr < end && *ptr != '"' && *ptr != '\n') {
+      if (*ptr == '\\' && ptr + 1 < end && ptr[1] != '\n') {
+        token.escaped = true;
+        ptr++;
+      }
+      ptr++;
+    }
+    if (ptr >= end || *ptr != '"') {
+      error = lexer.filename + ":" + std::to_string(token.line) +
+              ": unterminated string \"" + std::string{start, (size_t)std::min<ptrdiff_t>(ptr - start, 40)} + "\"";
+      return false;
+    }
+    token.kind = pbrt_token_kind::string;
+    token.text = {start, (size_t)(ptr - start)};
+    ptr++;
+    return true;
+  }
+  auto start = ptr;
+  while (ptr < end && !is_space(*ptr) && *ptr != '[' && *ptr != ']' &&
+         *ptr != '"' && *ptr != '#')
+    ptr++;
+  token.text = {start, (size_t)(ptr - start)};
+  token.kind = (c >= '0' && c <= '9') || c == '-' || c == '+' || c == '.'
+                   ? pbrt_token_kind::number
+                   : pbrt_token_kind::word;
+  return true;
+}
+
+static bool next_token(pbrt_lexer& lexer, pbrt_token& token, std::string& error) {
+  if (lexer.has_peek) {
+    lexer.has_peek = false;
+    token          = lexer.peeked;
+    return true;
+  }
+  return lex_token(lexer, token, error);
+}
+
+static bool peek_token(pbrt_lexer& lexer, pbrt_token& token, std::string& error) {
+  if (!lexer.has_peek) {
+    if (!lex_token(lexer, lexer.peeked, error)) return false;
+    lexer.has_peek = true;
+  }
+  token = lexer.peeked;
+  return true;
+}
+
+// Parses a whole token as a float; `.3`, `-0`, `+1`, `1e-3` are numbers.
+static bool parse_float(std::string_view text, float& value) {
+  if (!text.empty() && text[0] == '+') text.remove_prefix(1);
+  if (text.empty()) return false;
+  auto result = std::from_chars(text.data(), text.data() + text.size(), value);
+  if (result.ec == std::errc::result_out_of_range) {
+    // Underflow is fine (a tiny number), overflow is not.
+    auto copy   = std::string{text};
+    auto parsed = std::strtod(copy.c_str(), nullptr);
+    if (!std::isfinite(parsed) || std::abs(parsed) > flt_max) return false;
+    value = (float)parsed;
+    return true;
+  }
+  return result.ec == std::errc{} && result.ptr == text.data() + text.size();
+}
+
+static std::string unescape_string(const pbrt_token& token) {
+  if (!token.escaped) return std::string{token.text};
+  auto result = std::string{};
+  for (auto i = (size_t)0; i < token.text.size(); i++) {
+    auto c = token.text[i];
+    if (c == '\\' && i + 1 < token.text.size()) {
+      c = token.text[++i];
+      switch (c) {
+        case 'n': c = '\n'; break;
+        case 't': c = '\t'; break;
+        case 'r': c = '\r'; break;
+        case 'b': c = '\b'; break;
+        case 'f': c = '\f'; break;
+        default: break;
+      }
+    }
+    result.push_back(c);
+  }
+  return result;
+}
+
+}  // namespace yocto
+
+// -----------------------------------------------------------------------------
+// PARAMETERS
+// -----------------------------------------------------------------------------
+namespace yocto {
+
+// One "type name" value list. Booleans are stored as numbers 0/1.
+struct pbrt_param {
+  std::string              type    = "";
+  std::string              name    = "";
+  std::vector<float>       numbers = {};
+  std::vector<std::string> strings = {};
+  int                      line    = 0;
+  bool                     used    = false;
+};
+
+// Parameters of the current directive; entries are reused to avoid
+// allocations on the per-curve path.
+struct pbrt_param_list {
+  std::vector<pbrt_param> items = {};
+  int                     count = 0;
+};
+
+enum struct pbrt_value_kind { numbers, strings, bools, spectrum };
+
+static bool param_value_kind(std::string_view type, pbrt_value_kind& kind) {
+  static const auto number_types = std::unordered_set<std::string_view>{"float",
+      "integer", "point", "point2", "point3", "vector", "vector2", "vector3",
+      "normal", "normal3", "rgb", "color", "blackbody"};
+  if (number_types.count(type)) {
+    kind = pbrt_value_kind::numbers;
+  } else if (type == "string" || type == "texture") {
+    kind = pbrt_value_kind::strings;
+  } else if (type == "bool") {
+    kind = pbrt_value_kind::bools;
+  } else if (type == "spectrum") {
+    kind = pbrt_value_kind::spectrum;
+  } else {
+    return false;
+  }
+  return true;
+}
+
+}  // namespace yocto
+
+// -----------------------------------------------------------------------------
+// PARSER STATE
+// -----------------------------------------------------------------------------
+namespace yocto {
+
+// pbrt's per-attribute-block state.
+struct pbrt_graphics_state {
+  frame3f ctm      = identity3x4f;
+  int     material = 0;  // index into pbrt_state::materials
+  vec3f   emission = {0, 0, 0};
+};
+
+struct pbrt_stack_entry {
+  pbrt_graphics_state graphics  = {};
+  bool                attribute = true;  // AttributeBegin or TransformBegin
+  int                 line      = 0;
+};
+
+// Curves of one material and transform, appended to one shape.
+struct pbrt_curve_group {
+  int shape       = -1;
+  int last_vertex = -1;  // end vertex of the last curve, for chaining
+};
+
+struct pbrt_camera_state {
+  frame3f camera_to_world = identity3x4f;
+  float   fov             = 90;
+  float   focus           = 0;
+  float   aperture        = 0;
+};
+
+// Constant value of a named texture, if it has one.
+struct pbrt_texture {
+  bool  constant = false;
+  vec3f value    = {1, 1, 1};
+};
+
+struct pbrt_state {
+  scene_data*               scene    = nullptr;
+  pbrt_params               params   = {};
+  std::vector<std::string>* warnings = nullptr;
+  std::string               error    = "";
+
+  // Directive being parsed, for messages.
+  pbrt_lexer*      lexer     = nullptr;
+  std::string_view directive = {};
+  std::string_view type      = {};
+  int              line      = 0;
+  pbrt_param_list  list      = {};
+
+  // Graphics state.
+  pbrt_graphics_state                      graphics = {};
+  std::vector<pbrt_stack_entry>            stack    = {};
+  std::unordered_map<std::string, frame3f> coordinate_systems = {};
+  std::vector<std::string>                 open_files         = {};
+
+  // Materials as declared (index 0 is pbrt's default diffuse); scene
+  // materials are made from them on first use with an emission.
+  std::vector<material_data>                           materials = {};
+  std::vector<std::string>                             material_names = {};
+  std::unordered_map<std::string, int>                 named_materials = {};
+  std::map<std::tuple<int, float, float, float>, int>  scene_materials = {};
+  std::unordered_map<std::string, pbrt_texture>        textures = {};
+
+  // Curve groups and a cache of the last one used.
+  std::map<std::pair<int, std::array<float, 12>>, int> group_keys = {};
+  std::vector<pbrt_curve_group>                        groups     = {};
+  int                                                  last_group = -1;
+  int     last_group_material = -1;
+  frame3f last_group_ctm      = {};
+
+  pbrt_camera_state camera     = {};
+  bool              has_camera = false;
+  vec2i             film       = {0, 0};
+  bool              has_film   = false;
+
+  std::unordered_set<std::string> warned = {};
+};
+
+static std::string location(const pbrt_state& state, int line = -1) {
+  return state.lexer->filename + ":" + std::to_string(line < 0 ? state.line : line) + ": ";
+}
+
+static std::string directive_name(const pbrt_state& state) {
+  auto name = std::string{state.directive};
+  if (!state.type.empty()) name += " \"" + std::string{state.type} + "\"";
+  return name;
+}
+
+// Records the first error of a directive.
+static void set_error(pbrt_state& state, const std::string& message, int line = -1) {
+  if (!state.error.empty()) return;
+  state.error = location(state, line) + directive_name(state) + ": " + message;
+}
+
+static void add_warning(pbrt_state& state, const std::string& message) {
+  if (state.warnings) {
+    state.warnings->push_back(message);
+  } else {
+    std::fprintf(stderr, "warning: %s\n", message.c_str());
+  }
+}
+
+// Warns once per key; the message gets the file and line.
+static void warn_once(pbrt_state& state, const std::string& key, const std::string& message) {
+  if (!state.warned.insert(key).second) return;
+  add_warning(state, location(state) + message);
+}
+
+static std::string param_decl(const pbrt_param& param) {
+  return "\"" + param.type + " " + param.name + "\"";
+}
+
+// Finds a parameter by name and marks it used.
+static pbrt_param* find_param(pbrt_state& state, std::string_view name) {
+  for (auto i = 0; i < state.list.count; i++) {
+    auto& param = state.list.items[i];
+    if (param.name == name) {
+      param.used = true;
+      return &param;
+    }
+  }
+  return nullptr;
+}
+
+static void type_error(pbrt_state& state, const pbrt_param& param, const char* expected) {
+  set_error(state, "parameter " + param_decl(param) + " should be " + expected, param.line);
+}
+
+static bool check_count(pbrt_state& state, const pbrt_param& param, size_t count) {
+  auto size = param.numbers.size() + param.strings.size();
+  if (size == count) return true;
+  set_error(state,
+      "parameter " + param_decl(param) + " needs " + std::to_string(count) +
+          " value(s), got " + std::to_string(size),
+      param.line);
+  return false;
+}
+
+// Value of a named texture used where a constant is expected.
+static bool texture_constant(pbrt_state& state, const pbrt_param& param, vec3f& value) {
+  if (!check_count(state, param, 1)) return false;
+  auto it = state.textures.find(param.strings[0]);
+  if (it == state.textures.end()) {
+    set_error(state, "unknown texture \"" + param.strings[0] + "\"", param.line);
+    return false;
+  }
+  if (it->second.constant) {
+    value = it->second.value;
+    return true;
+  }
+  warn_once(state, "texture " + param.name + param.strings[0],
+      directive_name(state) + ": texture \"" + param.strings[0] + "\" for " +
+          param_decl(param) + " is not supported; using a constant");
+  return false;
+}
+
+static float get_float(pbrt_state& state, std::string_view name, float value) {
+  auto param = find_param(state, name);
+  if (!param) return value;
+  if (param->type == "float") {
+    if (check_count(state, *param, 1)) return param->numbers[0];
+  } else if (param->type == "texture") {
+    auto color = vec3f{value};
+    if (texture_constant(state, *param, color)) return mean(color);
+  } else {
+    type_error(state, *param, "a float");
+  }
+  return value;
+}
+
+static int get_int(pbrt_state& state, std::string_view name, int value) {
+  auto param = find_param(state, name);
+  if (!param) return value;
+  if (param->type != "integer") {
+    type_error(state, *param, "an integer");
+  } else if (check_count(state, *param, 1)) {
+    return (int)param->numbers[0];
+  }
+  return value;
+}
+
+static bool get_bool(pbrt_state& state, std::string_view name, bool value) {
+  auto param = find_param(state, name);
+  if (!param) return value;
+  if (param->type != "bool") {
+    type_error(state, *param, "a bool");
+  } else if (check_count(state, *param, 1)) {
+    return param->numbers[0] != 0;
+  }
+  return value;
+}
+
+static std::string get_string(pbrt_state& state, std::string_view name, const std::string& value) {
+  auto param = find_param(state, name);
+  if (!param) return value;
+  if (param->type != "string") {
+    type_error(state, *param, "a string");
+  } else if (check_count(state, *param, 1)) {
+    return param->strings[0];
+  }
+  return value;
+}
+
+// Approximate linear RGB of a blackbody at `temperature` kelvin, normalised
+// to a maximum of 1: Planck's law sampled at one wavelength per channel.
+static vec3f blackbody_to_rgb(float temperature) {
+  auto planck = [&](double lambda_nm) {
+    const auto h = 6.62606957e-34, c = 299792458.0, kb = 1.3806488e-23;
+    auto       l = lambda_nm * 1e-9;
+    return (2 * h * c * c) / (std::pow(l, 5) * (std::exp((h * c) / (l * kb * temperature)) - 1));
+  };
+  if (!(temperature > 0)) return {0, 0, 0};
+  auto rgb = vec3f{(float)planck(610), (float)planck(550), (float)planck(465)};
+  auto m   = max_component(rgb);
+  return m > 0 && std::isfinite(m) ? rgb / m : vec3f{1, 1, 1};
+}
+
+// Colour parameters: rgb/color, a float (grey), spectrum (approximated by its
+// mean), blackbody (approximated) or a constant texture.
+static vec3f get_rgb(pbrt_state& state, std::string_view name, const vec3f& value) {
+  auto param = find_param(state, name);
+  if (!param) return value;
+  auto& type = param->type;
+  if (type == "rgb" || type == "color") {
+    if (check_count(state, *param, 3))
+      return {param->numbers[0], param->numbers[1], param->numbers[2]};
+  } else if (type == "float") {
+    if (check_count(state, *param, 1)) return vec3f{param->numbers[0]};
+  } else if (type == "spectrum") {
+    if (!param->strings.empty()) {
+      warn_once(state, "spectrum " + param->strings[0],
+          directive_name(state) + ": named spectrum \"" + param->strings[0] +
+              "\" is not supported; using the default value");
+    } else if (param->numbers.size() < 2 || param->numbers.size() % 2 != 0) {
+      set_error(state, "parameter " + param_decl(*param) + " needs wavelength-value pairs",
+          param->line);
+    } else {
+      warn_once(state, "spectrum", directive_name(state) +
+                                       ": sampled spectra are approximated by their mean value");
+      auto sum = 0.0f;
+      for (auto i = (size_t)1; i < param->numbers.size(); i += 2) sum += param->numbers[i];
+      return vec3f{sum / (param->numbers.size() / 2)};
+    }
+  } else if (type == "blackbody") {
+    if (param->numbers.empty() || param->numbers.size() > 2) {
+      set_error(state, "parameter " + param_decl(*param) + " needs a temperature", param->line);
+    } else {
+      warn_once(state, "blackbody", directive_name(state) +
+                                        ": blackbody emission is approximated in RGB");
+      auto scale = param->numbers.size() == 2 ? param->numbers[1] : 1.0f;
+      return blackbody_to_rgb(param->numbers[0]) * scale;
+    }
+  } else if (type == "texture") {
+    auto color = value;
+    if (texture_constant(state, *param, color)) return color;
+  } else {
+    type_error(state, *param, "a colour (rgb, spectrum, blackbody)");
+  }
+  return value;
+}
+
+// Arrays of 3-vectors (point, normal, vector) and of floats.
+static const std::vector<float>* get_array(pbrt_state& state, std::string_view name,
+    std::initializer_list<std::string_view> types, int stride) {
+  auto param = find_param(state, name);
+  if (!param) return nullptr;
+  for (auto type : types) {
+    if (param->type != type) continue;
+    if (param->numbers.size() % stride != 0) {
+      set_error(state,
+          "parameter " + param_decl(*param) + " needs a multiple of " +
+              std::to_string(stride) + " values, got " +
+              std::to_string(param->numbers.size()),
+          param->line);
+      return nullptr;
+    }
+    return &param->numbers;
+  }
+  type_error(state, *param, std::string{*types.begin()}.c_str());
+  return nullptr;
+}
+
+// Reports parameters nobody read, once per directive and parameter.
+static void warn_unused_params(pbrt_state& state) {
+  for (auto i = 0; i < state.list.count; i++) {
+    auto& param = state.list.items[i];
+    if (param.used) continue;
+    auto name = directive_name(state);
+    warn_once(state, name + param_decl(param),
+        name + ": ignoring parameter " + param_decl(param));
+  }
+}
+
+// Parses one value of a parameter into `param`.
+static bool parse_param_value(pbrt_state& state, pbrt_param& param,
+    pbrt_value_kind kind, const pbrt_token& token) {
+  auto bad = [&](const char* expected) {
+    set_error(state,
+        "parameter " + param_decl(param) + ": expected " + expected + ", got " +
+            token_description(token),
+        token.line);
+    return false;
+  };
+  if (token.kind == pbrt_token_kind::number) {
+    if (kind == pbrt_value_kind::strings) return bad("a string");
+    if (kind == pbrt_value_kind::bools) return bad("true or false");
+    if (kind == pbrt_value_kind::spectrum && !param.strings.empty())
+      return bad("a string");
+    auto value = 0.0f;
+    if (!parse_float(token.text, value)) return bad("a number");
+    if (param.type == "integer" && value != std::floor(value)) return bad("an integer");
+    param.numbers.push_back(value);
+    return true;
+  }
+  if (token.kind == pbrt_token_kind::string || token.kind == pbrt_token_kind::word) {
+    if (kind == pbrt_value_kind::bools) {
+      if (token.text == "true") {
+        param.numbers.push_back(1);
+      } else if (token.text == "false") {
+        param.numbers.push_back(0);
+      } else {
+        return bad("true or false");
+      }
+      return true;
+    }
+    if (token.kind == pbrt_token_kind::word) return bad("a value");
+    if (kind == pbrt_value_kind::numbers) return bad("a number");
+    if (kind == pbrt_value_kind::spectrum && !param.numbers.empty())
+      return bad("a number");
+    param.strings.push_back(unescape_string(token));
+    return true;
+  }
+  return bad("a value");
+}
+
+// Parses the "type name" value lists that follow a directive.
+static bool parse_params(pbrt_state& state) {
+  auto& lexer = *state.lexer;
+  auto& list  = state.list;
+  list.count  = 0;
+  auto token  = pbrt_token{};
+  while (true) {
+    if (!peek_token(lexer, token, state.error)) return false;
+    if (token.kind != pbrt_token_kind::string) return true;
+    next_token(lexer, token, state.error);
+    // Declaration: type and name separated by spaces or tabs.
+    auto decl = token.text;
+    while (!decl.empty() && is_space(decl.front())) decl.remove_prefix(1);
+    while (!decl.empty() && is_space(decl.back())) decl.remove_suffix(1);
+    auto split = (size_t)0;
+    while (split < decl.size() && !is_space(decl[split])) split++;
+    auto type = decl.substr(0, split);
+    auto name = decl.substr(split);
+    while (!name.empty() && is_space(name.front())) name.remove_prefix(1);
+    auto kind = pbrt_value_kind::numbers;
+    if (name.empty() || std::any_of(name.begin(), name.end(), is_space)) {
+      set_error(state, "bad parameter declaration \"" + std::string{token.text} +
+                           "\" (expected \"type name\")", token.line);
+      return false;
+    }
+    if (!param_value_kind(type, kind)) {
+      set_error(state, "unknown parameter type \"" + std::string{type} + "\" in \"" +
+                           std::string{token.text} + "\"", token.line);
+      return false;
+    }
+    if (list.count == (int)list.items.size()) list.items.emplace_back();
+    auto& param = list.items[list.count++];
+    param.type.assign(type);
+    param.name.assign(name);
+    param.numbers.clear();
+    param.strings.clear();
+    param.line = token.line;
+    param.used = false;
+    // Values: a bracketed list or a single value.
+    if (!next_token(lexer, token, state.error)) return false;
+    if (token.kind == pbrt_token_kind::open) {
+      auto open_line = token.line;
+      while (true) {
+        if (!next_token(lexer, token, state.error)) return false;
+        if (token.kind == pbrt_token_kind::close) break;
+        if (token.kind == pbrt_token_kind::eof || token.kind == pbrt_token_kind::open) {
+          set_error(state, "parameter " + param_decl(param) + ": unterminated [ opened at line " +
+                               std::to_string(open_line), token.line);
+          return false;
+        }
+        if (!parse_param_value(state, param, kind, token)) return false;
+      }
+    } else {
+      if (!parse_param_value(state, param, kind, token)) return false;
+    }
+  }
+}
+
+// Reads `count` numbers, bracketed or not.
+static bool parse_numbers(pbrt_state& state, float* values, int count) {
+  auto& lexer = *state.lexer;
+  auto  token = pbrt_token{};
+  if (!peek_token(lexer, token, state.error)) return false;
+  auto bracket = token.kind == pbrt_token_kind::open;
+  if (bracket) next_token(lexer, token, state.error);
+  for (auto i = 0; i < count; i++) {
+    if (!next_token(lexer, token, state.error)) return false;
+    if (token.kind != pbrt_token_kind::number || !parse_float(token.text, values[i])) {
+      set_error(state, "expected " + std::to_string(count) + " numbers, got " +
+                           token_description(token) + " as value " + std::to_string(i + 1),
+          token.line);
+      return false;
+    }
+  }
+  if (bracket) {
+    if (!next_token(lexer, token, state.error)) return false;
+    if (token.kind != pbrt_token_kind::close) {
+      set_error(state, "expected ] after " + std::to_string(count) + " numbers, got " +
+                           token_description(token), token.line);
+      return false;
+    }
+  }
+  return true;
+}
+
+static bool parse_string(pbrt_state& state, std::string_view& value, const char* what) {
+  auto token = pbrt_token{};
+  if (!next_token(*state.lexer, token, state.error)) return false;
+  if (token.kind != pbrt_token_kind::string) {
+    set_error(state, std::string{"expected "} + what + " (a quoted string), got " +
+                         token_description(token), token.line);
+    return false;
+  }
+  value = token.text;
+  return true;
+}
+
+// Skips the arguments of a directive we do not use: everything up to the
+// next directive name.
+static bool skip_arguments(pbrt_state& state) {
+  auto token = pbrt_token{};
+  while (true) {
+    if (!peek_token(*state.lexer, token, state.error)) return false;
+    if (token.kind == pbrt_token_kind::eof) return true;
+    if (token.kind == pbrt_token_kind::word && token.text != "true" && token.text != "false")
+      return true;
+    next_token(*state.lexer, token, state.error);
+  }
+}
+
+}  // namespace yocto
+
+// -----------------------------------------------------------------------------
+// TRANSFORMS AND CAMERA
+// -----------------------------------------------------------------------------
+namespace yocto {
+
+static bool is_finite(const frame3f& frame) {
+  return isfinite(frame.x) && isfinite(frame.y) && isfinite(frame.z) && isfinite(frame.o);
+}
+
+// pbrt's 16 numbers are the matrix in column-major order (the translation is
+// values 12..14); only affine matrices are supported.
+static bool matrix_to_frame(pbrt_state& state, const float* values, frame3f& frame) {
+  auto w = values[15];
+  if (values[3] != 0 || values[7] != 0 || values[11] != 0 || w == 0) {
+    set_error(state, "projective matrices are not supported");
+    return false;
+  }
+  frame = {{values[0], values[1], values[2]}, {values[4], values[5], values[6]},
+      {values[8], values[9], values[10]}, {values[12], values[13], values[14]}};
+  if (w != 1) {
+    frame.x /= w;
+    frame.y /= w;
+    frame.z /= w;
+    frame.o /= w;
+  }
+  return true;
+}
+
+// pbrt's LookAt: camera-to-world has columns right, up, dir, eye with
+// right = up x dir in pbrt's (left-handed) camera space; returns its inverse.
+static bool lookat_to_frame(pbrt_state& state, const vec3f& eye, const vec3f& target,
+    const vec3f& up, frame3f& frame) {
+  auto dir   = target - eye;
+  auto right = length(dir) > 0 && length(up) > 0 ? cross(normalize(up), normalize(dir))
+                                                 : vec3f{0, 0, 0};
+  if (length(right) < 1e-6f) {
+    set_error(state, "the up vector is parallel to the viewing direction (or zero)");
+    return false;
+  }
+  dir          = normalize(dir);
+  right        = normalize(right);
+  auto new_up  = cross(dir, right);
+  auto to_world = frame3f{right, new_up, dir, eye};
+  frame        = inverse(to_world, false);
+  return true;
+}
+
+// Camera for the state's camera and film. pbrt's camera space has x to the
+// image's right, y up, z forward; Yocto's camera looks along -z, so z flips
+// and x stays: the image is pbrt's, not its mirror. The fov spans the shorter
+// image side; Yocto's film (36mm) spans the longer one.
+static camera_data make_pbrt_camera(const pbrt_camera_state& pcam, const vec2i& film) {
+  auto camera   = camera_data{};
+  auto c2w      = pcam.camera_to_world;
+  camera.frame  = {safe_normalize(c2w.x), safe_normalize(c2w.y), -safe_normalize(c2w.z), c2w.o};
+  camera.aspect = (float)film.x / (float)film.y;
+  camera.film   = 0.036f;
+  auto shorter  = camera.aspect >= 1 ? camera.film / camera.aspect : camera.film * camera.aspect;
+  auto fov      = std::clamp(pcam.fov, 0.01f, 179.0f);
+  camera.lens   = shorter / (2 * std::tan(radians(fov) / 2));
+  camera.focus    = pcam.focus > 0 ? pcam.focus : 10000.0f;
+  camera.aperture = 2 * pcam.aperture;
+  return camera;
+}
+
+}  // namespace yocto
+
+// -----------------------------------------------------------------------------
+// MATERIALS
+// -----------------------------------------------------------------------------
+namespace yocto {
+
+// Yocto glossy roughness (GGX alpha = roughness^2) from pbrt's roughness,
+// remapped by pbrt-v4's rule alpha = sqrt(roughness) unless remapping is off.
+static float pbrt_roughness_to_yocto(float roughness, bool remap) {
+  auto alpha = remap ? std::sqrt(std::max(roughness, 0.0f)) : std::max(roughness, 0.0f);
+  return std::clamp(std::sqrt(alpha), 0.0f, 1.0f);
+}
+
+static float get_roughness(pbrt_state& state, float default_roughness) {
+  auto roughness = get_float(state, "roughness", default_roughness);
+  if (find_param(state, "uroughness") || find_param(state, "vroughness")) {
+    auto u    = get_float(state, "uroughness", roughness);
+    auto v    = get_float(state, "vroughness", roughness);
+    roughness = (u + v) / 2;
+  }
+  return pbrt_roughness_to_yocto(roughness, get_bool(state, "remaproughness", true));
+}
+
+// pbrt's hair material with pbrt's precedence: sigma_a, else colour, else
+// melanin (one pigment given makes the other 0), else eumelanin 1.3.
+static material_data make_hair_material(pbrt_state& state) {
+  auto material = material_data{};
+  material.type = material_type::hair;
+  auto& hair    = material.hair;
+  auto defaults = hair_material{};
+  hair.beta_m   = get_float(state, "beta_m", defaults.beta_m);
+  hair.beta_n   = get_float(state, "beta_n", defaults.beta_n);
+  hair.alpha    = get_float(state, "alpha", defaults.alpha);
+  hair.eta      = get_float(state, "eta", defaults.eta);
+  auto sigma_a     = find_param(state, "sigma_a");
+  auto color       = find_param(state, "color") ? find_param(state, "color")
+                                                : find_param(state, "reflectance");
+  auto eumelanin   = find_param(state, "eumelanin");
+  auto pheomelanin = find_param(state, "pheomelanin");
+  if (sigma_a) {
+    hair.has_sigma_a = true;
+    hair.sigma_a     = get_rgb(state, "sigma_a", {0, 0, 0});
+  } else if (color) {
+    hair.has_color = true;
+    hair.color     = get_rgb(state, color->name, {0, 0, 0});
+  } else if (eumelanin || pheomelanin) {
+    hair.eumelanin   = get_float(state, "eumelanin", 0);
+    hair.pheomelanin = get_float(state, "pheomelanin", 0);
+  }
+  // Parameters that lost to a higher-precedence one are not "ignored".
+  for (auto name : {"color", "reflectance", "eumelanin", "pheomelanin"}) find_param(state, name);
+  auto bad = [](float value, float min, float max) {
+    return !(value >= min && value <= max);
+  };
+  if (bad(hair.beta_m, 0, 1) || bad(hair.beta_n, 0, 1))
+    set_error(state, "beta_m and beta_n must be in [0, 1]");
+  if (bad(hair.eta, 1, 10)) set_error(state, "eta must be in [1, 10]");
+  if (bad(hair.alpha, -90, 90)) set_error(state, "alpha must be in [-90, 90] degrees");
+  if (hair.eumelanin < 0 || hair.pheomelanin < 0 || min_component(hair.sigma_a) < 0)
+    set_error(state, "pigment concentrations and sigma_a must be non-negative");
+  return material;
+}
+
+// Maps a pbrt material to matte, glossy or hair; others to the nearest with a
+// warning.
+static material_data make_pbrt_material(pbrt_state& state, std::string_view type) {
+  auto material = material_data{};
+  if (type == "hair") return make_hair_material(state);
+  if (type == "matte") {
+    material.color = get_rgb(state, "Kd", {0.5f, 0.5f, 0.5f});
+  } else if (type == "diffuse") {
+    material.color = get_rgb(state, "reflectance", {0.5f, 0.5f, 0.5f});
+  } else if (type == "coateddiffuse") {
+    material.type      = material_type::glossy;
+    material.color     = get_rgb(state, "reflectance", {0.5f, 0.5f, 0.5f});
+    material.roughness = get_roughness(state, 0);
+    material.ior       = get_float(state, "eta", 1.5f);
+  } else if (type == "plastic") {
+    material.type      = material_type::glossy;
+    material.color     = get_rgb(state, "Kd", {0.25f, 0.25f, 0.25f});
+    material.roughness = get_roughness(state, 0.1f);
+  } else if (type == "uber" || type == "substrate" || type == "coatedconductor" ||
+             type == "conductor" || type == "metal" || type == "dielectric" ||
+             type == "glass" || type == "thindielectric" || type == "mirror") {
+    warn_once(state, "material " + std::string{type},
+        directive_name(state) + ": material \"" + std::string{type} +
+            "\" is not supported; approximated by glossy");
+    material.type      = material_type::glossy;
+    material.color     = find_param(state, "Kd") ? get_rgb(state, "Kd", {0.5f, 0.5f, 0.5f})
+                                                 : get_rgb(state, "reflectance", {0.5f, 0.5f, 0.5f});
+    material.roughness = get_roughness(state, 0);
+    for (auto i = 0; i < state.list.count; i++) state.list.items[i].used = true;
+  } else {
+    warn_once(state, "material " + std::string{type},
+        directive_name(state) + ": material \"" + std::string{type} +
+            "\" is not supported; approximated by matte");
+    material.color = find_param(state, "Kd") ? get_rgb(state, "Kd", {0.5f, 0.5f, 0.5f})
+                                             : get_rgb(state, "reflectance", {0.5f, 0.5f, 0.5f});
+    for (auto i = 0; i < state.list.count; i++) state.list.items[i].used = true;
+  }
+  return material;
+}
+
+// Scene material for the current material and area light, made on first use.
+static int current_scene_material(pbrt_state& state) {
+  auto& graphics = state.graphics;
+  auto  key      = std::tuple{graphics.material, graphics.emission.x, graphics.emission.y,
+      graphics.emission.z};
+  auto  it       = state.scene_materials.find(key);
+  if (it != state.scene_materials.end()) return it->second;
+  auto& scene    = *state.scene;
+  auto  material = state.materials[graphics.material];
+  material.emission = graphics.emission;
+  auto name = state.material_names[graphics.material];
+  if (graphics.emission != vec3f{0, 0, 0}) name += "-emission";
+  for (auto& other : scene.material_names) {
+    if (other == name) {
+      name += "-" + std::to_string(scene.materials.size());
+      break;
+    }
+  }
+  scene.materials.push_back(material);
+  scene.material_names.push_back(name);
+  state.scene_materials[key] = (int)scene.materials.size() - 1;
+  return (int)scene.materials.size() - 1;
+}
+
+}  // namespace yocto
+
+// -----------------------------------------------------------------------------
+// LIGHTS
+// -----------------------------------------------------------------------------
+namespace yocto {
+
+// Bilinear lookup with clamping at the borders.
+static vec3f lookup_clamped(const texture_data& image, const vec2f& uv) {
+  auto s  = std::clamp(uv.x * image.width - 0.5f, 0.0f, (float)(image.width - 1));
+  auto t  = std::clamp(uv.y * image.height - 0.5f, 0.0f, (float)(image.height - 1));
+  auto i  = std::min((int)s, image.width - 1), j = std::min((int)t, image.height - 1);
+  auto i1 = std::min(i + 1, image.width - 1), j1 = std::min(j + 1, image.height - 1);
+  auto fu = s - i, fv = t - j;
+  auto at = [&](int x, int y) { return image.pixels[(size_t)y * image.width + x]; };
+  return at(i, j) * (1 - fu) * (1 - fv) + at(i1, j) * fu * (1 - fv) +
+         at(i, j1) * (1 - fu) * fv + at(i1, j1) * fu * fv;
+}
+
+// Resamples a pbrt-v4 equal-area octahedral map into Yocto's equirectangular
+// layout in the environment's local frame (see make_environment_frame).
+static texture_data equal_area_to_equirect(const texture_data& octahedral) {
+  auto size  = std::max(octahedral.width, 2);
+  auto image = texture_data{};
+  image.width  = 2 * size;
+  image.height = size;
+  image.pixels.resize((size_t)image.width * image.height);
+  for (auto j = 0; j < image.height; j++) {
+    for (auto i = 0; i < image.width; i++) {
+      auto local = equirect_to_direction(
+          {(i + 0.5f) / image.width, (j + 0.5f) / image.height});
+      auto pbrt_local = vec3f{local.x, local.z, local.y};
+      image.pixels[(size_t)j * image.width + i] =
+          lookup_clamped(octahedral, equal_area_sphere_to_square(pbrt_local));
+    }
+  }
+  return image;
+}
+
+// pbrt's light space has z up with phi = atan2(y, x); Yocto's equirect uses y
+// up with phi = atan2(z, x). Swapping the y and z axes of the light frame maps
+// one onto the other, so the map's pixels keep their directions.
+static frame3f make_environment_frame(const frame3f& ctm) {
+  return {safe_normalize(ctm.x), safe_normalize(ctm.z), safe_normalize(ctm.y), ctm.o};
+}
+
+static vec3f get_light_scale(pbrt_state& state) {
+  auto param = find_param(state, "scale");
+  if (!param) return {1, 1, 1};
+  return get_rgb(state, "scale", {1, 1, 1});  // v3 spectrum or v4 float
+}
+
+static bool parse_light_source(pbrt_state& state) {
+  auto& scene = *state.scene;
+  auto  ctm   = state.graphics.ctm;
+  if (state.type == "infinite") {
+    auto emission = get_rgb(state, "L", {1, 1, 1}) * get_light_scale(state);
+    auto mapname  = get_string(state, "mapname", "");   // pbrt-v3, equirect
+    auto filename = get_string(state, "filename", "");  // pbrt-v4, equal-area
+    auto env      = environment_data{};
+    env.frame     = make_environment_frame(ctm);
+    env.emission  = emission;
+    auto map      = !mapname.empty() ? mapname : filename;
+    if (!map.empty()) {
+      auto path = path_join(path_dirname(state.lexer->filename), map);
+      auto ec   = std::error_code{};
+      if (!std::filesystem::exists(path, ec)) {
+        add_warning(state, location(state) + directive_name(state) + ": environment map \"" +
+                               map + "\" not found; using a constant environment");
+      } else {
+        auto image = texture_data{};
+        auto error = std::string{};
+        if (!load_image(path, image, error)) {
+          set_error(state, "cannot load environment map: " + error);
+          return false;
+        }
+        if (!filename.empty()) {
+          if (image.width != image.height) {
+            set_error(state, "equal-area environment map \"" + map + "\" must be square, is " +
+                                 std::to_string(image.width) + "x" + std::to_string(image.height));
+            return false;
+          }
+          image = equal_area_to_equirect(image);
+        }
+        scene.textures.push_back(std::move(image));
+        scene.texture_names.push_back(std::filesystem::path(map).stem().string());
+        env.emission_tex = (int)scene.textures.size() - 1;
+      }
+    }
+    scene.environments.push_back(env);
+    scene.environment_names.push_back("environment" + std::to_string(scene.environments.size()));
+  } else if (state.type == "distant") {
+    auto emission = get_rgb(state, "L", {1, 1, 1}) * get_light_scale(state);
+    auto from     = get_array(state, "from", {"point", "point3"}, 3);
+    auto to       = get_array(state, "to", {"point", "point3"}, 3);
+    auto p_from   = from && from->size() == 3 ? vec3f{(*from)[0], (*from)[1], (*from)[2]}
+                                              : vec3f{0, 0, 0};
+    auto p_to     = to && to->size() == 3 ? vec3f{(*to)[0], (*to)[1], (*to)[2]} : vec3f{0, 0, 1};
+    auto direction = safe_normalize(transform_vector(ctm, p_from - p_to));
+    if (direction == vec3f{0, 0, 0}) {
+      set_error(state, "\"from\" and \"to\" must differ");
+      return false;
+    }
+    scene.distant_lights.push_back({direction, emission});
+  } else {
+    warn_once(state, "light " + std::string{state.type},
+        directive_name(state) + ": light type not supported; skipped");
+    for (auto i = 0; i < state.list.count; i++) state.list.items[i].used = true;
+  }
+  return state.error.empty();
+}
+
+}  // namespace yocto
+
+// -----------------------------------------------------------------------------
+// SHAPES
+// -----------------------------------------------------------------------------
+namespace yocto {
+
+static int add_shape_instance(pbrt_state& state, shape_data&& shape, const char* kind) {
+  auto& scene = *state.scene;
+  auto  name  = std::string{kind} + std::to_string(scene.shapes.size() + 1);
+  scene.shapes.push_back(std::move(shape));
+  scene.shape_names.push_back(name);
+  scene.instances.push_back(
+      {state.graphics.ctm, (int)scene.shapes.size() - 1, current_scene_material(state)});
+  scene.instance_names.push_back(name);
+  return (int)scene.shapes.size() - 1;
+}
+
+// Curve group of the current material and transform.
+static pbrt_curve_group& current_curve_group(pbrt_state& state) {
+  auto  material = current_scene_material(state);
+  auto& ctm      = state.graphics.ctm;
+  if (state.last_group >= 0 && state.last_group_material == material &&
+      state.last_group_ctm == ctm)
+    return state.groups[state.last_group];
+  auto key = std::pair<int, std::array<float, 12>>{material,
+      {ctm.x.x, ctm.x.y, ctm.x.z, ctm.y.x, ctm.y.y, ctm.y.z, ctm.z.x, ctm.z.y, ctm.z.z,
+          ctm.o.x, ctm.o.y, ctm.o.z}};
+  auto it = state.group_keys.find(key);
+  if (it == state.group_keys.end()) {
+    auto group  = pbrt_curve_group{};
+    group.shape = add_shape_instance(state, shape_data{}, "curves");
+    state.groups.push_back(group);
+    it = state.group_keys.emplace(key, (int)state.groups.size() - 1).first;
+  }
+  state.last_group          = it->second;
+  state.last_group_material = material;
+  state.last_group_ctm      = ctm;
+  return state.groups[it->second];
+}
+
+// pbrt curves: cubic Bezier (or v4 b-spline / quadratic) control points with
+// widths interpolated from width0 to width1 along the whole curve.
+static bool parse_curve(pbrt_state& state) {
+  auto points = get_array(state, "P", {"point3", "point"}, 3);
+  if (!state.error.empty()) return false;
+  if (!points) {
+    set_error(state, "missing parameter \"point3 P\"");
+    return false;
+  }
+  auto width  = get_float(state, "width", 1);
+  auto width0 = get_float(state, "width0", width);
+  auto width1 = get_float(state, "width1", width);
+  auto type   = get_string(state, "type", "flat");
+  auto basis  = get_string(state, "basis", "bezier");
+  auto degree = get_int(state, "degree", 3);
+  if (!state.error.empty()) return false;
+  if (!(width0 >= 0 && width1 >= 0)) {
+    set_error(state, "curve widths must be non-negative");
+    return false;
+  }
+  if (type == "ribbon") {
+    find_param(state, "N");
+    warn_once(state, "ribbon", directive_name(state) +
+                                   ": ribbon normals are ignored; curves are rendered round");
+  } else if (type != "flat" && type != "cylinder") {
+    set_error(state, "unknown curve type \"" + type + "\"");
+    return false;
+  }
+  if ((basis != "bezier" && basis != "bspline") || (degree != 2 && degree != 3)) {
+    set_error(state, "unsupported curve basis \"" + basis + "\" of degree " + std::to_string(degree));
+    return false;
+  }
+  // Control points as cubic Bezier segments.
+  auto  num_points = (int)points->size() / 3;
+  auto  cp         = [&](int i) {
+    return vec3f{(*points)[3 * i], (*points)[3 * i + 1], (*points)[3 * i + 2]};
+  };
+  auto  segments = std::vector<std::array<vec3f, 4>>{};
+  auto& p        = *points;
+  (void)p;
+  if (basis == "bezier" && degree == 3) {
+    if (num_points < 4 || (num_points - 1) % 3 != 0) {
+      set_error(state, "a cubic Bezier curve needs 4 + 3n control points, got " +
+                           std::to_string(num_points));
+      return false;
+    }
+    for (auto i = 0; i + 3 < num_points; i += 3)
+      segments.push_back({cp(i), cp(i + 1), cp(i + 2), cp(i + 3)});
+  } else if (basis == "bezier") {
+    if (num_points < 3 || (num_points - 1) % 2 != 0) {
+      set_error(state, "a quadratic Bezier curve needs 3 + 2n control points, got " +
+                           std::to_string(num_points));
+      return false;
+    }
+    // Degree elevation: q1 = p0/3 + 2p1/3, q2 = 2p1/3 + p2/3.
+    for (auto i = 0; i + 2 < num_points; i += 2)
+      segments.push_back({cp(i), (cp(i) + 2.0f * cp(i + 1)) / 3.0f,
+          (2.0f * cp(i + 1) + cp(i + 2)) / 3.0f, cp(i + 2)});
+  } else {
+    if (num_points < degree + 1) {
+      set_error(state, "a b-spline of degree " + std::to_string(degree) + " needs at least " +
+                           std::to_string(degree + 1) + " control points, got " +
+                           std::to_string(num_points));
+      return false;
+    }
+    // Uniform b-spline segments in Bezier form (Boehm's knot insertion).
+    for (auto i = 0; i + degree < num_points; i++) {
+      if (degree == 3) {
+        auto p0 = cp(i), p1 = cp(i + 1), p2 = cp(i + 2), p3 = cp(i + 3);
+        segments.push_back({(p0 + 4.0f * p1 + p2) / 6.0f, (2.0f * p1 + p2) / 3.0f,
+            (p1 + 2.0f * p2) / 3.0f, (p1 + 4.0f * p2 + p3) / 6.0f});
+      } else {
+        auto q0 = (cp(i) + cp(i + 1)) / 2.0f, q1 = cp(i + 1), q2 = (cp(i + 1) + cp(i + 2)) / 2.0f;
+        segments.push_back({q0, (q0 + 2.0f * q1) / 3.0f, (2.0f * q1 + q2) / 3.0f, q2});
+      }
+    }
+  }
+  // Append to the group's shape, chaining onto the previous curve's end.
+  auto& group = current_curve_group(state);
+  auto& shape = state.scene->shapes[group.shape];
+  auto  count = (int)segments.size();
+  for (auto s = 0; s < count; s++) {
+    auto& b      = segments[s];
+    auto  radius = [&](int k) {
+      auto t = (s + k / 3.0f) / count;
+      return ((1 - t) * width0 + t * width1) / 2;
+    };
+    auto first = -1;
+    if (group.last_vertex >= 0 && shape.positions[group.last_vertex] == b[0]) {
+      first = group.last_vertex;
+    } else {
+      first = (int)shape.positions.size();
+      shape.positions.push_back(b[0]);
+      shape.radius.push_back(radius(0));
+    }
+    auto base = (int)shape.positions.size();
+    for (auto k = 1; k < 4; k++) {
+      shape.positions.push_back(b[k]);
+      shape.radius.push_back(radius(k));
+    }
+    shape.curves.push_back({first, base, base + 1, base + 2});
+    group.last_vertex = base + 2;
+  }
+  return true;
+}
+
+static shape_data make_sphere_shape(float radius, int steps_phi = 64, int steps_theta = 32) {
+  auto shape = shape_data{};
+  for (auto j = 0; j <= steps_theta; j++) {
+    for (auto i = 0; i <= steps_phi; i++) {
+      auto u = (float)i / steps_phi, v = (float)j / steps_theta;
+      auto phi = 2 * pif * u, theta = pif * v;
+      auto n = vec3f{std::cos(phi) * std::sin(theta), std::sin(phi) * std::sin(theta),
+          std::cos(theta)};
+      shape.positions.push_back(radius * n);
+      shape.normals.push_back(n);
+      shape.texcoords.push_back({u, v});
+    }
+  }
+  auto vid = [&](int i, int j) { return j * (steps_phi + 1) + i; };
+  for (auto j = 0; j < steps_theta; j++) {
+    for (auto i = 0; i < steps_phi; i++) {
+      // Outward-facing; the triangles that collapse at the poles are dropped.
+      if (j != steps_theta - 1)
+        shape.triangles.push_back({vid(i, j), vid(i, j + 1), vid(i + 1, j + 1)});
+      if (j != 0) shape.triangles.push_back({vid(i, j), vid(i + 1, j + 1), vid(i + 1, j)});
+    }
+  }
+  return shape;
+}
+
+static shape_data make_disk_shape(float radius, float inner, float height, int steps = 64) {
+  auto shape = shape_data{};
+  auto ring  = [&](float r) {
+    auto start = (int)shape.positions.size();
+    for (auto i = 0; i < steps; i++) {
+      auto phi = 2 * pif * i / steps;
+      auto p   = vec3f{r * std::cos(phi), r * std::sin(phi), height};
+      shape.positions.push_back(p);
+      shape.normals.push_back({0, 0, 1});
+      shape.texcoords.push_back({(float)i / steps, radius > 0 ? 1 - r / radius : 0});
+    }
+    return start;
+  };
+  if (inner <= 0) {
+    shape.positions.push_back({0, 0, height});
+    shape.normals.push_back({0, 0, 1});
+    shape.texcoords.push_back({0, 1});
+    auto outer = ring(radius);
+    for (auto i = 0; i < steps; i++)
+      shape.triangles.push_back({0, outer + i, outer + (i + 1) % steps});
+  } else {
+    auto in = ring(inner), out = ring(radius);
+    for (auto i = 0; i < steps; i++) {
+      auto next = (i + 1) % steps;
+      shape.triangles.push_back({in + i, out + i, out + next});
+      shape.triangles.push_back({in + i, out + next, in + next});
+    }
+  }
+  return shape;
+}
+
+static bool parse_triangle_mesh(pbrt_state& state) {
+  auto indices  = get_array(state, "indices", {"integer"}, 3);
+  auto points   = get_array(state, "P", {"point3", "point"}, 3);
+  auto normals  = get_array(state, "N", {"normal", "normal3"}, 3);
+  auto uv_param = find_param(state, "uv") ? "uv" : "st";
+  auto uvs      = get_array(state, uv_param, {"float", "point2"}, 2);
+  if (!state.error.empty()) return false;
+  if (!points) {
+    set_error(state, "missing parameter \"point3 P\"");
+    return false;
+  }
+  auto shape       = shape_data{};
+  auto num_vertices = (int)points->size() / 3;
+  for (auto i = 0; i < num_vertices; i++)
+    shape.positions.push_back({(*points)[3 * i], (*points)[3 * i + 1], (*points)[3 * i + 2]});
+  if (indices) {
+    for (auto i = 0; i + 2 < (int)indices->size(); i += 3) {
+      auto t = vec3i{(int)(*indices)[i], (int)(*indices)[i + 1], (int)(*indices)[i + 2]};
+      for (auto k = 0; k < 3; k++) {
+        if (t[k] < 0 || t[k] >= num_vertices) {
+          set_error(state, "index " + std::to_string(t[k]) + " of triangle " +
+                               std::to_string(i / 3) + " is out of range (" +
+                               std::to_string(num_vertices) + " vertices)");
+          return false;
+        }
+      }
+      shape.triangles.push_back(t);
+    }
+  } else if (num_vertices == 3) {
+    shape.triangles.push_back({0, 1, 2});
+  } else {
+    set_error(state, "missing parameter \"integer indices\"");
+    return false;
+  }
+  if (normals) {
+    if ((int)normals->size() / 3 != num_vertices) {
+      set_error(state, "\"N\" has " + std::to_string(normals->size() / 3) +
+                           " normals for " + std::to_string(num_vertices) + " vertices");
+      return false;
+    }
+    for (auto i = 0; i < num_vertices; i++)
+      shape.normals.push_back(safe_normalize(
+          vec3f{(*normals)[3 * i], (*normals)[3 * i + 1], (*normals)[3 * i + 2]}));
+  }
+  if (uvs) {
+    if ((int)uvs->size() / 2 != num_vertices) {
+      set_error(state, "\"" + std::string{uv_param} + "\" has " +
+                           std::to_string(uvs->size() / 2) + " pairs for " +
+                           std::to_string(num_vertices) + " vertices");
+      return false;
+    }
+    for (auto i = 0; i < num_vertices; i++)
+      shape.texcoords.push_back({(*uvs)[2 * i], (*uvs)[2 * i + 1]});
+  }
+  add_shape_instance(state, std::move(shape), "mesh");
+  return true;
+}
+
+static bool parse_shape(pbrt_state& state) {
+  auto& type = state.type;
+  if (type == "curve") return parse_curve(state);
+  if (type == "sphere") {
+    auto radius = get_float(state, "radius", 1);
+    if (!state.error.empty()) return false;
+    if (!(radius > 0)) {
+      set_error(state, "radius must be positive");
+      return false;
+    }
+    add_shape_instance(state, make_sphere_shape(radius), "sphere");
+  } else if (type == "disk") {
+    auto radius = get_float(state, "radius", 1);
+    auto inner  = get_float(state, "innerradius", 0);
+    auto height = get_float(state, "height", 0);
+    if (!state.error.empty()) return false;
+    if (!(radius > 0) || !(inner >= 0 && inner < radius)) {
+      set_error(state, "radius must be positive and innerradius in [0, radius)");
+      return false;
+    }
+    add_shape_instance(state, make_disk_shape(radius, inner, height), "disk");
+  } else if (type == "trianglemesh") {
+    return parse_triangle_mesh(state);
+  } else if (type == "plymesh") {
+    auto filename = get_string(state, "filename", "");
+    if (!state.error.empty()) return false;
+    if (filename.empty()) {
+      set_error(state, "missing parameter \"string filename\"");
+      return false;
+    }
+    auto shape = shape_data{};
+    auto error = std::string{};
+    if (!load_shape(path_join(path_dirname(state.lexer->filename), filename), shape, error)) {
+      set_error(state, error);
+      return false;
+    }
+    add_shape_instance(state, std::move(shape), "ply");
+  } else {
+    warn_once(state, "shape " + std::string{type},
+        directive_name(state) + ": shape type not supported; skipped");
+    for (auto i = 0; i < state.list.count; i++) state.list.items[i].used = true;
+  }
+  return state.error.empty();
+}
+
+}  // namespace yocto
+
+// -----------------------------------------------------------------------------
+// DIRECTIVES
+// -----------------------------------------------------------------------------
+namespace yocto {
+
+static bool parse_pbrt_file(pbrt_state& state, const std::string& filename, int depth);
+
+static bool parse_include(pbrt_state& state) {
+  auto name = std::string_view{};
+  if (!parse_string(state, name, "a file name")) return false;
+  auto path = path_join(path_dirname(state.lexer->filename), std::string{name});
+  auto ec   = std::error_code{};
+  auto canonical = std::filesystem::weakly_canonical(path, ec).string();
+  if (ec) canonical = path;
+  for (auto& open : state.open_files) {
+    if (open == canonical) {
+      set_error(state, "include cycle: \"" + std::string{name} + "\" is already being read");
+      return false;
+    }
+  }
+  if (!std::filesystem::exists(path, ec)) {
+    set_error(state, "cannot find \"" + std::string{name} + "\" (" + path + ")");
+    return false;
+  }
+  // The included file's directives report their own file and line.
+  auto saved = std::tuple{state.lexer, state.directive, state.type, state.line};
+  if (!parse_pbrt_file(state, path, (int)state.open_files.size())) return false;
+  std::tie(state.lexer, state.directive, state.type, state.line) = saved;
+  return true;
+}
+
+static bool parse_begin_end(pbrt_state& state, std::string_view directive) {
+  if (directive == "AttributeBegin" || directive == "TransformBegin") {
+    state.stack.push_back({state.graphics, directive == "AttributeBegin", state.line});
+    return true;
+  }
+  auto attribute = directive == "AttributeEnd";
+  if (state.stack.empty()) {
+    set_error(state, "no matching " + std::string{attribute ? "AttributeBegin" : "TransformBegin"});
+    return false;
+  }
+  auto& top = state.stack.back();
+  if (top.attribute != attribute) {
+    set_error(state, "mismatched block: opened by " +
+                         std::string{top.attribute ? "AttributeBegin" : "TransformBegin"} +
+                         " at line " + std::to_string(top.line));
+    return false;
+  }
+  if (attribute) {
+    state.graphics = top.graphics;
+  } else {
+    state.graphics.ctm = top.graphics.ctm;
+  }
+  state.stack.pop_back();
+  return true;
+}
+
+static bool parse_transform(pbrt_state& state, std::string_view directive) {
+  auto& ctm = state.graphics.ctm;
+  float v[16];
+  if (directive == "Translate") {
+    if (!parse_numbers(state, v, 3)) return false;
+    ctm = ctm * translation_frame({v[0], v[1], v[2]});
+  } else if (directive == "Scale") {
+    if (!parse_numbers(state, v, 3)) return false;
+    ctm = ctm * scaling_frame({v[0], v[1], v[2]});
+  } else if (directive == "Rotate") {
+    if (!parse_numbers(state, v, 4)) return false;
+    if (vec3f{v[1], v[2], v[3]} == vec3f{0, 0, 0}) {
+      set_error(state, "the rotation axis is zero");
+      return false;
+    }
+    ctm = ctm * rotation_frame({v[1], v[2], v[3]}, radians(v[0]));
+  } else if (directive == "LookAt") {
+    if (!parse_numbers(state, v, 9)) return false;
+    auto frame = frame3f{};
+    if (!lookat_to_frame(state, {v[0], v[1], v[2]}, {v[3], v[4], v[5]}, {v[6], v[7], v[8]}, frame))
+      return false;
+    ctm = ctm * frame;
+  } else if (directive == "Transform" || directive == "ConcatTransform") {
+    auto frame = frame3f{};
+    if (!parse_numbers(state, v, 16) || !matrix_to_frame(state, v, frame)) return false;
+    ctm = directive == "Transform" ? frame : ctm * frame;
+  } else if (directive == "Identity") {
+    ctm = identity3x4f;
+  } else if (directive == "CoordinateSystem") {
+    auto name = std::string_view{};
+    if (!parse_string(state, name, "a name")) return false;
+    state.coordinate_systems[std::string{name}] = ctm;
+  } else if (directive == "CoordSysTransform") {
+    auto name = std::string_view{};
+    if (!parse_string(state, name, "a name")) return false;
+    auto it = state.coordinate_systems.find(std::string{name});
+    if (it == state.coordinate_systems.end()) {
+      set_error(state, "unknown coordinate system \"" + std::string{name} + "\"");
+      return false;
+    }
+    ctm = it->second;
+  }
+  if (!is_finite(ctm)) {
+    set_error(state, "the transform is not finite");
+    return false;
+  }
+  return true;
+}
+
+static bool parse_camera(pbrt_state& state) {
+  if (!parse_params(state)) return false;
+  if (state.type != "perspective") {
+    warn_once(state, "camera", directive_name(state) +
+                                   ": only perspective cameras are supported; using one");
+  }
+  auto det = glm::determinant(frame_rotation(state.graphics.ctm));
+  if (!(std::abs(det) > 1e-12f)) {
+    set_error(state, "the camera transform is singular");
+    return false;
+  }
+  auto& camera           = state.camera;
+  camera.camera_to_world = inverse(state.graphics.ctm);
+  camera.fov             = get_float(state, "fov", 90);
+  camera.focus           = get_float(state, "focaldistance", 0);
+  camera.aperture        = get_float(state, "lensradius", 0);
+  state.has_camera       = true;
+  state.coordinate_systems["camera"] = camera.camera_to_world;
+  if (!(camera.fov > 0 && camera.fov < 180)) set_error(state, "fov must be in (0, 180) degrees");
+  return state.error.empty();
+}
+
+// One directive; the directive name has been read.
+static bool parse_directive(pbrt_state& state, std::string_view directive) {
+  auto& scene    = *state.scene;
+  state.type     = {};
+  auto with_type = [&](const char* what) { return parse_string(state, state.type, what); };
+  if (directive == "Shape") {
+    if (!with_type("a shape type") || !parse_params(state) || !parse_shape(state)) return false;
+  } else if (directive == "AttributeBegin" || directive == "AttributeEnd" ||
+             directive == "TransformBegin" || directive == "TransformEnd") {
+    if (!parse_begin_end(state, directive)) return false;
+  } else if (directive == "Translate" || directive == "Scale" || directive == "Rotate" ||
+             directive == "LookAt" || directive == "Transform" ||
+             directive == "ConcatTransform" || directive == "Identity" ||
+             directive == "CoordinateSystem" || directive == "CoordSysTransform") {
+    if (!parse_transform(state, directive)) return false;
+  } else if (directive == "Include" || directive == "Import") {
+    if (!parse_include(state)) return false;
+  } else if (directive == "Material") {
+    if (!with_type("a material type") || !parse_params(state)) return false;
+    auto material = make_pbrt_material(state, state.type);
+    state.materials.push_back(material);
+    state.material_names.push_back(std::string{state.type});
+    state.graphics.material = (int)state.materials.size() - 1;
+  } else if (directive == "MakeNamedMaterial") {
+    auto name = std::string_view{};
+    if (!parse_string(state, name, "a material name") || !parse_params(state)) return false;
+    auto type = get_string(state, "type", "");
+    if (type.empty()) {
+      set_error(state, "MakeNamedMaterial \"" + std::string{name} +
+                           "\" needs a \"string type\" parameter");
+      return false;
+    }
+    auto material = make_pbrt_material(state, type);
+    state.materials.push_back(material);
+    state.material_names.push_back(std::string{name});
+    if (state.named_materials.count(std::string{name}))
+      add_warning(state, location(state) + "MakeNamedMaterial: \"" + std::string{name} +
+                             "\" redefined");
+    state.named_materials[std::string{name}] = (int)state.materials.size() - 1;
+  } else if (directive == "NamedMaterial") {
+    auto name = std::string_view{};
+    if (!parse_string(state, name, "a material name")) return false;
+    auto it = state.named_materials.find(std::string{name});
+    if (it == state.named_materials.end()) {
+      set_error(state, "unknown material \"" + std::string{name} + "\"");
+      return false;
+    }
+    state.graphics.material = it->second;
+  } else if (directive == "Texture") {
+    auto name = std::string_view{}, type = std::string_view{};
+    if (!parse_string(state, name, "a texture name") ||
+        !parse_string(state, type, "a texture type") || !with_type("a texture class") ||
+        !parse_params(state))
+      return false;
+    auto texture = pbrt_texture{};
+    if (state.type == "constant") {
+      texture.constant = true;
+      texture.value    = get_rgb(state, "value", {1, 1, 1});
+    } else {
+      for (auto i = 0; i < state.list.count; i++) state.list.items[i].used = true;
+    }
+    state.textures[std::string{name}] = texture;
+  } else if (directive == "LightSource") {
+    if (!with_type("a light type") || !parse_params(state) || !parse_light_source(state))
+      return false;
+  } else if (directive == "AreaLightSource") {
+    if (!with_type("an area light type") || !parse_params(state)) return false;
+    if (state.type == "diffuse") {
+      state.graphics.emission = get_rgb(state, "L", {1, 1, 1}) * get_light_scale(state);
+      get_bool(state, "twosided", false);
+    } else {
+      warn_once(state, "arealight", directive_name(state) + ": area light type not supported");
+      for (auto i = 0; i < state.list.count; i++) state.list.items[i].used = true;
+    }
+  } else if (directive == "Camera") {
+    if (!with_type("a camera type") || !parse_camera(state)) return false;
+  } else if (directive == "Film") {
+    if (!with_type("a film type") || !parse_params(state)) return false;
+    auto v3          = state.type == "image";
+    state.film.x     = get_int(state, "xresolution", v3 ? 640 : 1280);
+    state.film.y     = get_int(state, "yresolution", v3 ? 480 : 720);
+    state.has_film   = true;
+    get_string(state, "filename", "");  // the output name is the user's choice
+    if (state.film.x <= 0 || state.film.y <= 0 || state.film.x > 1 << 16 ||
+        state.film.y > 1 << 16)
+      set_error(state, "resolution must be in [1, 65536]");
+    scene.settings.resolution = std::max(state.film.x, state.film.y);
+  } else if (directive == "Sampler") {
+    if (!with_type("a sampler type") || !parse_params(state)) return false;
+    auto samples = get_int(state, "pixelsamples", 0);
+    if (samples < 0) set_error(state, "pixelsamples must be positive");
+    if (samples > 0) scene.settings.samples = samples;
+  } else if (directive == "Integrator") {
+    if (!with_type("an integrator type") || !parse_params(state)) return false;
+    auto bounces = get_int(state, "maxdepth", -1);
+    if (bounces >= 0) scene.settings.bounces = bounces;
+  } else if (directive == "WorldBegin") {
+    state.graphics.ctm               = identity3x4f;
+    state.coordinate_systems["world"] = identity3x4f;
+  } else if (directive == "WorldEnd" || directive == "ReverseOrientation") {
+    // Nothing to do: the end of the file ends the world, orientation is unused.
+  } else if (directive == "ActiveTransform") {
+    auto token = pbrt_token{};
+    if (!next_token(*state.lexer, token, state.error)) return false;
+    if (token.kind != pbrt_token_kind::word ||
+        (token.text != "All" && token.text != "StartTime" && token.text != "EndTime")) {
+      set_error(state, "expected All, StartTime or EndTime, got " + token_description(token));
+      return false;
+    }
+    if (token.text != "All")
+      warn_once(state, "motion", "ActiveTransform: motion blur is not supported; "
+                                 "the transforms apply at all times");
+  } else if (directive == "PixelFilter" || directive == "Accelerator" ||
+             directive == "TransformTimes" || directive == "Option" ||
+             directive == "ColorSpace" || directive == "MakeNamedMedium" ||
+             directive == "MediumInterface" || directive == "Attribute") {
+    warn_once(state, "directive " + std::string{directive},
+        std::string{directive} + ": directive ignored");
+    return skip_arguments(state);
+  } else if (state.params.lenient) {
+    add_warning(state, location(state) + "unknown directive " + std::string{directive} +
+                           " skipped");
+    return skip_arguments(state);
+  } else {
+    set_error(state, "unknown directive (use --lenient to skip it)");
+    return false;
+  }
+  if (!state.error.empty()) return false;
+  warn_unused_params(state);
+  return true;
+}
+
+static bool parse_pbrt_file(pbrt_state& state, const std::string& filename, int depth) {
+  if (depth > 64) {
+    set_error(state, "includes nested too deeply");
+    return false;
+  }
+  auto lexer     = pbrt_lexer{};
+  lexer.filename = filename;
+  if (!read_whole_file(filename, lexer.data, state.error)) return false;
+  lexer.ptr = lexer.data.data();
+  lexer.end = lexer.data.data() + lexer.data.size();
+  auto ec   = std::error_code{};
+  auto canonical = std::filesystem::weakly_canonical(filename, ec).string();
+  state.open_files.push_back(ec ? filename : canonical);
+  state.lexer = &lexer;
+  auto token  = pbrt_token{};
+  while (true) {
+    if (!next_token(lexer, token, state.error)) return false;
+    if (token.kind == pbrt_token_kind::eof) break;
+    state.lexer     = &lexer;
+    state.line      = token.line;
+    state.directive = token.text;
+    state.type      = {};
+    if (token.kind != pbrt_token_kind::word) {
+      state.directive = "";
+      state.error     = location(state) + "expected a directive, got " + token_description(token);
+      return false;
+    }
+    if (!parse_directive(state, token.text)) {
+      if (state.error.empty()) set_error(state, "cannot parse directive");
+      return false;
+    }
+  }
+  state.open_files.pop_back();
+  return true;
+}
+
+bool load_pbrt_scene(const std::string& filename, scene_data& scene, std::string& error,
+    const pbrt_params& params, std::vector<std::string>* warnings) {
+  scene       = {};
+  auto state  = pbrt_state{};
+  state.scene = &scene;
+  state.params   = params;
+  state.warnings = warnings;
+  // pbrt's default material is a grey diffuse.
+  state.materials.push_back(material_data{material_type::matte, {0, 0, 0}, {0.5f, 0.5f, 0.5f}});
+  state.material_names.push_back("default");
+  if (!parse_pbrt_file(state, filename, 0)) {
+    error = state.error;
+    scene = {};
+    return false;
+  }
+  if (!state.stack.empty()) {
+    add_warning(state, filename + ": " + std::to_string(state.stack.size()) +
+                           " unclosed AttributeBegin/TransformBegin block(s)");
+  }
+  auto film = state.has_film ? state.film : vec2i{640, 480};
+  scene.cameras.push_back(make_pbrt_camera(state.camera, film));
+  scene.camera_names.push_back("camera");
+  if (!scene.settings.resolution) scene.settings.resolution = std::max(film.x, film.y);
+  if (params.curves_as_lines) {
+    for (auto& shape : scene.shapes)
+      if (!shape.curves.empty()) shape = curves_to_lines(shape, params.segments);
+  }
+  return true;
+}
+
+}  // namespace yocto
+
+// -----------------------------------------------------------------------------
+// CURVES TO LINES
+// -----------------------------------------------------------------------------
+namespace yocto {
+
+shape_data curves_to_lines(const shape_data& curves, int segments) {
+  segments        = std::max(segments, 1);
+  auto lines      = shape_data{};
+  auto has_radius = curves.radius.size() == curves.positions.size();
+  auto num_vertices = (int)curves.positions.size();
+  // Line vertex of each curve end point, so strands share their joints.
+  auto end_vertex = std::vector<int>(curves.positions.size(), -1);
+  auto emit       = [&](const vec4i& c, float u) {
+    auto& p = curves.positions;
+    lines.positions.push_back(eval_bezier(p[c.x], p[c.y], p[c.z], p[c.w], u));
+    if (has_radius) {
+      auto& r = curves.radius;
+      lines.radius.push_back(eval_bezier(r[c.x], r[c.y], r[c.z], r[c.w], u));
+    }
+    return (int)lines.positions.size() - 1;
+  };
+  lines.positions.reserve(curves.curves.size() * segments + 1);
+  lines.lines.reserve(curves.curves.size() * segments);
+  for (auto& c : curves.curves) {
+    if (glm::any(glm::lessThan(c, vec4i{0})) ||
+        glm::any(glm::greaterThanEqual(c, vec4i{num_vertices})))
+      continue;
+    if (end_vertex[c.x] < 0) end_vertex[c.x] = emit(c, 0);
+    auto previous = end_vertex[c.x];
+    for (auto s = 1; s <= segments; s++) {
+      auto next = -1;
+      if (s < segments) {
+        next = emit(c, (float)s / segments);
+      } else {
+        if (end_vertex[c.w] < 0) end_vertex[c.w] = emit(c, 1);
+        next = end_vertex[c.w];
+      }
+      lines.lines.push_back({previous, next});
+      previous = next;
+    }
+  }
+  return lines;
+}
+
+}  // namespace yocto
+
+// -----------------------------------------------------------------------------
+// HAIR FILES
+// -----------------------------------------------------------------------------
+namespace yocto {
+
+// Cem Yuksel's .hair layout: a 128-byte header, then the optional arrays
+// segments (uint16 per strand), points (3 floats), thickness, transparency
+// (1 float) and colour (3 floats) per point, in that order, little-endian.
+struct hair_header {
+  char     signature[4]         = {'H', 'A', 'I', 'R'};
+  uint32_t num_strands          = 0;
+  uint32_t num_points           = 0;
+  uint32_t flags                = 0;
+  uint32_t default_segments     = 0;
+  float    default_thickness    = 1;
+  float    default_transparency = 0;
+  float    default_color[3]     = {0, 0, 0};
+  char     info[88]             = {};
+};
+static_assert(sizeof(hair_header) == 128, "the .hair header is 128 bytes");
+
+enum hair_flags : uint32_t {
+  hair_has_segments     = 1,
+  hair_has_points       = 2,
+  hair_has_thickness    = 4,
+  hair_has_transparency = 8,
+  hair_has_color        = 16,
+};
+
+static bool load_hair_model(const std::string& filename, shape_data& shape,
+    std::string& error, vec3f* color, bool* has_color_array) {
+  shape     = {};
+  auto data = std::string{};
+  if (!read_whole_file(filename, data, error)) return false;
+  auto header = hair_header{};
+  if (data.size() < sizeof(header)) {
+    error = filename + ": truncated header at byte " + std::to_string(data.size()) +
+            " (a .hair header has 128 bytes)";
+    return false;
+  }
+  std::memcpy(&header, data.data(), sizeof(header));
+  if (std::memcmp(header.signature, "HAIR", 4) != 0) {
+    error = filename + ": not a .hair file (bad signature at byte 0)";
+    return false;
+  }
+  auto flags = header.flags;
+  if (!(flags & hair_has_points)) {
+    error = filename + ": the header (byte 12) declares no points array";
+    return false;
+  }
+  // Check every count against the file size before allocating anything.
+  auto strands = (uint64_t)header.num_strands, points = (uint64_t)header.num_points;
+  auto offset_segments  = (uint64_t)sizeof(header);
+  auto offset_points    = offset_segments + ((flags & hair_has_segments) ? 2 * strands : 0);
+  auto offset_thickness = offset_points + 12 * points;
+  auto offset_transp    = offset_thickness + ((flags & hair_has_thickness) ? 4 * points : 0);
+  auto offset_color     = offset_transp + ((flags & hair_has_transparency) ? 4 * points : 0);
+  auto expected_size    = offset_color + ((flags & hair_has_color) ? 12 * points : 0);
+  if (expected_size > data.size()) {
+    error = filename + ": truncated at byte " + std::to_string(data.size()) + ": the header (" +
+            std::to_string(strands) + " strands, " + std::to_string(points) +
+            " points) needs " + std::to_string(expected_size) + " bytes";
+    return false;
+  }
+  if (points > (uint64_t)std::numeric_limits<int>::max() / 4) {
+    error = filename + ": too many points (" + std::to_string(points) + ") at byte 8";
+    return false;
+  }
+  auto bytes = (const unsigned char*)data.data();
+  auto read_float = [&](uint64_t offset) {
+    auto value = 0.0f;
+    std::memcpy(&value, bytes + offset, 4);
+    return value;
+  };
+  auto strand_segments = [&](uint64_t strand) -> uint64_t {
+    if (!(flags & hair_has_segments)) return header.default_segments;
+    auto value = (uint16_t)0;
+    std::memcpy(&value, bytes + offset_segments + 2 * strand, 2);
+    return value;
+  };
+  auto total = (uint64_t)0;
+  for (auto s = (uint64_t)0; s < strands; s++) total += strand_segments(s) + 1;
+  if (total != points) {
+    error = filename + ": the strands' segments " +
+            std::string{(flags & hair_has_segments) ? "(array at byte 128)" : "(default at byte 16)"} +
+            " add up to " + std::to_string(total) + " points, the header (byte 8) says " +
+            std::to_string(points);
+    return false;
+  }
+  // Points and radii, checked for garbage.
+  auto positions = std::vector<vec3f>(points);
+  auto radii     = std::vector<float>(points, header.default_thickness / 2);
+  for (auto i = (uint64_t)0; i < points; i++) {
+    auto offset  = offset_points + 12 * i;
+    positions[i] = {read_float(offset), read_float(offset + 4), read_float(offset + 8)};
+    if (!isfinite(positions[i])) {
+      error = filename + ": point " + std::to_string(i) + " at byte " + std::to_string(offset) +
+              " is not finite";
+      return false;
+    }
+    if (flags & hair_has_thickness) radii[i] = read_float(offset_thickness + 4 * i) / 2;
+    if (!(radii[i] >= 0 && radii[i] < flt_max)) {
+      error = filename + ": thickness of point " + std::to_string(i) + " at byte " +
+              std::to_string((flags & hair_has_thickness) ? offset_thickness + 4 * i : 20) +
+              " is not a non-negative number";
+      return false;
+    }
+  }
+  if (color) {
+    if (flags & hair_has_color) {
+      auto sum = vec3f{0, 0, 0};
+      for (auto i = (uint64_t)0; i < points; i++) {
+        auto offset = offset_color + 12 * i;
+        auto c      = vec3f{read_float(offset), read_float(offset + 4), read_float(offset + 8)};
+        if (isfinite(c)) sum += c;
+      }
+      *color = points ? sum / (float)points : vec3f{0, 0, 0};
+    } else {
+      *color = {header.default_color[0], header.default_color[1], header.default_color[2]};
+    }
+  }
+  if (has_color_array) *has_color_array = (flags & hair_has_color) != 0;
+  // Catmull-Rom through each strand's points as cubic Bezier segments:
+  // tangents m_i = (p_{i+1} - p_{i-1}) / 2 (one-sided at the ends), inner
+  // control points p_i + m_i / 3 and p_{i+1} - m_{i+1} / 3.
+  shape.positions.reserve(points * 3);
+  shape.radius.reserve(points * 3);
+  auto first = (uint64_t)0;
+  for (auto s = (uint64_t)0; s < strands; s++) {
+    auto count = strand_segments(s);
+    auto p     = [&](int64_t i) {
+      return positions[first + std::clamp<int64_t>(i, 0, (int64_t)count)];
+    };
+    auto r       = [&](int64_t i) { return radii[first + i]; };
+    auto tangent = [&](int64_t i) {
+      if (i == 0) return p(1) - p(0);
+      if (i == (int64_t)count) return p(count) - p(count - 1);
+      return (p(i + 1) - p(i - 1)) / 2.0f;
+    };
+    if (count > 0) {
+      shape.positions.push_back(p(0));
+      shape.radius.push_back(r(0));
+    }
+    for (auto i = (int64_t)0; i < (int64_t)count; i++) {
+      auto start = (int)shape.positions.size() - 1;
+      shape.positions.push_back(p(i) + tangent(i) / 3.0f);
+      shape.positions.push_back(p(i + 1) - tangent(i + 1) / 3.0f);
+      shape.positions.push_back(p(i + 1));
+      shape.radius.push_back((2 * r(i) + r(i + 1)) / 3);
+      shape.radius.push_back((r(i) + 2 * r(i + 1)) / 3);
+      shape.radius.push_back(r(i + 1));
+      shape.curves.push_back({start, start + 1, start + 2, start + 3});
+    }
+    first += count + 1;
+  }
+  return true;
+}
+
+bool load_hair_model(
+    const std::string& filename, shape_data& shape, std::string& error, vec3f* color) {
+  return load_hair_model(filename, shape, error, color, nullptr);
+}
+
+bool save_hair_model(const std::string& filename, const shape_data& shape, std::string& error) {
+  // Strands: chains of curves (lines) where each starts at the previous end.
+  auto segments = std::vector<uint16_t>{};
+  auto vertices = std::vector<int>{};
+  auto add_element = [&](int start, int end, bool continues) {
+    if (!continues) {
+      segments.push_back(0);
+      vertices.push_back(start);
+    }
+    if (segments.back() == 65535) return false;
+    segments.back()++;
+    vertices.push_back(end);
+    return true;
+  };
+  auto num_vertices = (int)shape.positions.size();
+  auto in_range = [&](int v) { return v >= 0 && v < num_vertices; };
+  for (auto i = 0; i < (int)shape.curves.size(); i++) {
+    auto& c = shape.curves[i];
+    if (!in_range(c.x) || !in_range(c.w)) {
+      error = filename + ": curve " + std::to_string(i) + " references a missing vertex";
+      return false;
+    }
+    if (!add_element(c.x, c.w, i > 0 && shape.curves[i - 1].w == c.x)) {
+      error = filename + ": a strand has more than 65535 segments";
+      return false;
+    }
+  }
+  for (auto i = 0; i < (int)shape.lines.size(); i++) {
+    auto& l = shape.lines[i];
+    if (!in_range(l.x) || !in_range(l.y)) {
+      error = filename + ": line " + std::to_string(i) + " references a missing vertex";
+      return false;
+    }
+    if (!add_element(l.x, l.y, i > 0 && shape.lines[i - 1].y == l.x)) {
+      error = filename + ": a strand has more than 65535 segments";
+      return false;
+    }
+  }
+  if (segments.empty()) {
+    error = filename + ": the shape has no curves or lines to save";
+    return false;
+  }
+  auto has_radius = shape.radius.size() == shape.positions.size();
+  auto header     = hair_header{};
+  header.num_strands = (uint32_t)segments.size();
+  header.num_points  = (uint32_t)vertices.size();
+  header.flags = hair_has_segments | hair_has_points | (has_radius ? (uint32_t)hair_has_thickness : 0u);
+  std::snprintf(header.info, sizeof(header.info), "yocto-hair");
+  auto data = std::string((const char*)&header, sizeof(header));
+  data.append((const char*)segments.data(), segments.size() * sizeof(uint16_t));
+  for (auto v : vertices) data.append((const char*)&shape.positions[v], 12);
+  if (has_radius) {
+    for (auto v : vertices) {
+      auto thickness = 2 * shape.radius[v];
+      data.append((const char*)&thickness, 4);
+    }
+  }
+  // Binary write through a temporary name.
+  auto temporary = make_temporary_filename(filename);
+  auto file      = std::fopen(temporary.c_str(), "wb");
+  if (!file) {
+    error = filename + ": cannot create file";
+    return false;
+  }
+  auto written = std::fwrite(data.data(), 1, data.size(), file);
+  auto closed  = std::fclose(file) == 0;
+  if (written != data.size() || !closed) {
+    std::remove(temporary.c_str());
+    error = filename + ": cannot write file";
+    return false;
+  }
+  if (std::rename(temporary.c_str(), filename.c_str()) != 0) {
+    std::remove(temporary.c_str());
+    error = filename + ": cannot write file";
+    return false;
+  }
+  return true;
+}
+
+bool load_hair_scene(const std::string& filename, scene_data& scene, std::string& error,
+    const pbrt_params& params) {
+  scene            = {};
+  auto shape       = shape_data{};
+  auto color       = vec3f{0, 0, 0};
+  auto color_array = false;
+  if (!load_hair_model(filename, shape, error, &color, &color_array)) return false;
+  if (shape.curves.empty()) {
+    error = filename + ": the model has no strand with a segment";
+    return false;
+  }
+  if (params.curves_as_lines) shape = curves_to_lines(shape, params.segments);
+  auto material = material_data{};
+  material.type = material_type::hair;
+  if (color_array) {
+    // Chiang's inversion needs a reflectance strictly inside (0, 1).
+    material.hair.has_color = true;
+    material.hair.color     = glm::clamp(color, vec3f{0.01f}, vec3f{0.99f});
+  }
+  auto name = std::filesystem::path(filename).stem().string();
+  scene.shapes.push_back(std::move(shape));
+  scene.shape_names.push_back(name);
+  scene.materials.push_back(material);
+  scene.material_names.push_back("hair");
+  scene.instances.push_back({identity3x4f, 0, 0});
+  scene.instance_names.push_back(name);
+  scene.environments.push_back({identity3x4f, {1, 1, 1}, -1});
+  scene.environment_names.push_back("sky");
+  add_missing_camera(scene);
+  return true;
+}
+
+}  // namespace yocto
+
+// -----------------------------------------------------------------------------
+// MAPPINGS
+// -----------------------------------------------------------------------------
+namespace yocto {
+
+// Clarberg 2008: the sphere's upper hemisphere fills the inner diamond
+// |u| + |v| <= 1, the lower one the four outer triangles; r = sqrt(1 - |z|)
+// and the angle in the quadrant is proportional to the position along the
+// diamond's edge, which makes the mapping area-preserving.
+vec2f equal_area_sphere_to_square(const vec3f& d) {
+  auto ax = std::abs(d.x), ay = std::abs(d.y), az = std::abs(d.z);
+  auto r   = safe_sqrt(1 - az);
+  auto a   = std::max(ax, ay), b = std::min(ax, ay);
+  auto phi = a > 0 ? std::atan(b / a) * 2 / pif : 0.0f;  // in [0, 1]
+  if (ax < ay) phi = 1 - phi;
+  auto v = phi * r;
+  auto u = r - v;
+  if (d.z < 0) {
+    std::swap(u, v);
+    u = 1 - u;
+    v = 1 - v;
+  }
+  u = std::copysign(u, d.x);
+  v = std::copysign(v, d.y);
+  return {(u + 1) / 2, (v + 1) / 2};
+}
+
+vec3f equal_area_square_to_sphere(const vec2f& uv) {
+  auto u = 2 * uv.x - 1, v = 2 * uv.y - 1;
+  auto au = std::abs(u), av = std::abs(v);
+  auto signed_distance = 1 - (au + av);  // > 0 in the upper hemisphere
+  auto r   = 1 - std::abs(signed_distance);
+  auto phi = (r == 0 ? 1 : (av - au) / r + 1) * pif / 4;
+  auto z   = std::copysign(1 - r * r, signed_distance);
+  auto s   = r * safe_sqrt(2 - r * r);
+  return {std::copysign(std::cos(phi), u) * s, std::copysign(std::sin(phi), v) * s, z};
+}
+
+}  // namespace yocto

@@ -1,0 +1,962 @@
+//
+// Tests of Yocto/PbrtIO: the pbrt tokenizer and parser (each directive,
+// parameter type, both syntaxes, includes), bad input, and the .hair format.
+// Scenes are written to a temporary directory at test time.
+//
+
+#include <gtest/gtest.h>
+#include <unistd.h>
+#include <yocto/yocto_pbrtio.h>
+#include <yocto/yocto_sceneio.h>
+#include <zlib.h>
+
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+
+using namespace yocto;
+namespace fs = std::filesystem;
+
+// -----------------------------------------------------------------------------
+// HELPERS
+// -----------------------------------------------------------------------------
+
+// A fresh directory per test, removed at the end.
+struct temp_dir {
+  fs::path path;
+  temp_dir() {
+    auto info = ::testing::UnitTest::GetInstance()->current_test_info();
+    path      = fs::temp_directory_path() / ("yocto_pbrtio_" + std::to_string(getpid()) +
+                                        "_" + info->name());
+    fs::remove_all(path);
+    fs::create_directories(path);
+  }
+  ~temp_dir() { fs::remove_all(path); }
+  std::string operator/(const std::string& name) const { return (path / name).string(); }
+};
+
+static void write_text(const std::string& filename, const std::string& text) {
+  fs::create_directories(fs::path(filename).parent_path());
+  auto stream = std::ofstream(filename, std::ios::binary);
+  stream << text;
+}
+
+static void write_gz(const std::string& filename, const std::string& text) {
+  fs::create_directories(fs::path(filename).parent_path());
+  auto file = gzopen(filename.c_str(), "wb");
+  ASSERT_NE(file, nullptr);
+  ASSERT_EQ(gzwrite(file, text.data(), (unsigned)text.size()), (int)text.size());
+  ASSERT_EQ(gzclose(file), Z_OK);
+}
+
+// Writes `text` as dir/scene.pbrt and loads it.
+static bool load_text(const temp_dir& dir, const std::string& text, scene_data& scene,
+    std::string& error, std::vector<std::string>* warnings = nullptr,
+    const pbrt_params& params = {}) {
+  write_text(dir / "scene.pbrt", text);
+  auto local_warnings = std::vector<std::string>{};
+  return load_pbrt_scene(
+      dir / "scene.pbrt", scene, error, params, warnings ? warnings : &local_warnings);
+}
+
+static bool contains(const std::string& text, const std::string& part) {
+  return text.find(part) != std::string::npos;
+}
+
+static bool any_contains(const std::vector<std::string>& texts, const std::string& part) {
+  for (auto& text : texts)
+    if (contains(text, part)) return true;
+  return false;
+}
+
+static void expect_near(const vec3f& a, const vec3f& b, float tolerance = 1e-5f) {
+  EXPECT_NEAR(a.x, b.x, tolerance);
+  EXPECT_NEAR(a.y, b.y, tolerance);
+  EXPECT_NEAR(a.z, b.z, tolerance);
+}
+
+// A cubic Bezier curve in pbrt syntax.
+static std::string curve_text(const vec3f& p0, const vec3f& p1, const vec3f& p2,
+    const vec3f& p3, float w0, float w1, const char* point_type = "point3") {
+  char buffer[512];
+  std::snprintf(buffer, sizeof(buffer),
+      "Shape \"curve\" \"%s P\" [ %g %g %g %g %g %g %g %g %g %g %g %g ] "
+      "\"float width0\" [ %g ] \"float width1\" [ %g ] \"string type\" \"cylinder\"\n",
+      point_type, p0.x, p0.y, p0.z, p1.x, p1.y, p1.z, p2.x, p2.y, p2.z, p3.x, p3.y, p3.z, w0,
+      w1);
+  return buffer;
+}
+
+// A few strands of `segments` chained curves each: stand-in geometry.
+static std::string strands_text(int strands, int segments, const char* point_type,
+    const vec3f& origin = {0, 0, 0}) {
+  auto text = std::string{};
+  for (auto s = 0; s < strands; s++) {
+    for (auto k = 0; k < segments; k++) {
+      auto base = origin + vec3f{0.1f * s, 0.3f * k, 0};
+      text += curve_text(base, base + vec3f{0.02f, 0.1f, 0}, base + vec3f{-0.02f, 0.2f, 0},
+          base + vec3f{0, 0.3f, 0}, 0.01f, 0.008f, point_type);
+    }
+  }
+  return text;
+}
+
+static int count_curves(const scene_data& scene) {
+  auto count = 0;
+  for (auto& shape : scene.shapes) count += (int)shape.curves.size();
+  return count;
+}
+
+// -----------------------------------------------------------------------------
+// LEXICAL DETAILS AND PARAMETERS
+// -----------------------------------------------------------------------------
+
+TEST(pbrtio, lexical_details) {
+  // Comments, values with and without brackets, tabs and spaces inside the
+  // declaration, `.3`, `+1`, `-0` and `1e-1` numbers, v4 bare booleans.
+  auto dir   = temp_dir{};
+  auto scene = scene_data{};
+  auto error = std::string{};
+  auto text  = std::string{
+      "# a comment\n"
+      "Film \"image\" \"integer xresolution\" 300 # trailing comment\n"
+      "   \"integer yresolution\" [ 200 ]\n"
+      "Camera \"perspective\" \"float fov\" [ 4.5e1 ]\n"
+      "WorldBegin\n"
+      "Material \"hair\" \"float\teumelanin\" .3 \"float   beta_m\" [+.25] \"float alpha\" -0\n"
+      "  \"float beta_n\" 1e-1\n"
+      "AreaLightSource \"diffuse\" \"rgb L\" [1 2 3] \"bool twosided\" true\n"
+      "Shape \"sphere\" \"float radius\" 2\n"};
+  ASSERT_TRUE(load_text(dir, text, scene, error)) << error;
+  EXPECT_EQ(scene.settings.resolution, 300);
+  EXPECT_FLOAT_EQ(scene.cameras[0].aspect, 1.5f);
+  ASSERT_EQ(scene.materials.size(), 1u);
+  auto& hair = scene.materials[0].hair;
+  EXPECT_EQ(scene.materials[0].type, material_type::hair);
+  EXPECT_FLOAT_EQ(hair.eumelanin, 0.3f);
+  EXPECT_FLOAT_EQ(hair.pheomelanin, 0.0f);
+  EXPECT_FLOAT_EQ(hair.beta_m, 0.25f);
+  EXPECT_FLOAT_EQ(hair.beta_n, 0.1f);
+  EXPECT_FLOAT_EQ(hair.alpha, 0.0f);
+  expect_near(scene.materials[0].emission, {1, 2, 3});
+}
+
+TEST(pbrtio, parameter_types) {
+  // Every parameter type we read: float, integer, bool (quoted and bare),
+  // string, rgb, color (v3 alias), spectrum, blackbody, point/point3,
+  // normal/normal3, point2 and texture.
+  auto dir      = temp_dir{};
+  auto scene    = scene_data{};
+  auto error    = std::string{};
+  auto warnings = std::vector<std::string>{};
+  auto text     = std::string{
+      "Sampler \"halton\" \"integer pixelsamples\" 64\n"
+      "Integrator \"path\" \"integer maxdepth\" [ 7 ]\n"
+      "WorldBegin\n"
+      "Texture \"grey\" \"spectrum\" \"constant\" \"rgb value\" [ .25 .5 .75 ]\n"
+      "MakeNamedMaterial \"a\" \"string type\" \"matte\" \"color Kd\" [ .1 .2 .3 ]\n"
+      "MakeNamedMaterial \"b\" \"string type\" \"diffuse\" \"spectrum reflectance\" "
+      "[ 400 .2 500 .4 600 .6 ]\n"
+      "MakeNamedMaterial \"c\" \"string type\" \"diffuse\" \"texture reflectance\" \"grey\"\n"
+      "MakeNamedMaterial \"d\" \"string type\" \"coateddiffuse\" \"float roughness\" .0625 "
+      "\"bool remaproughness\" \"false\"\n"
+      "AttributeBegin\n"
+      "AreaLightSource \"diffuse\" \"blackbody L\" [ 6500 ]\n"
+      "NamedMaterial \"a\" Shape \"sphere\"\n"
+      "AttributeEnd\n"
+      "NamedMaterial \"b\" Shape \"trianglemesh\" \"point P\" [0 0 0 1 0 0 0 1 0] "
+      "\"normal N\" [0 0 1 0 0 1 0 0 1] \"point2 uv\" [0 0 1 0 0 1] \"integer indices\" [0 1 2]\n"
+      "NamedMaterial \"c\" Shape \"trianglemesh\" \"point3 P\" [0 0 0 1 0 0 0 1 0] "
+      "\"normal3 N\" [0 0 2 0 0 2 0 0 2] \"float st\" [0 0 1 0 0 1]\n"
+      "NamedMaterial \"d\" Shape \"disk\"\n"};
+  ASSERT_TRUE(load_text(dir, text, scene, error, &warnings)) << error;
+  EXPECT_EQ(scene.settings.samples, 64);
+  EXPECT_EQ(scene.settings.bounces, 7);
+  ASSERT_EQ(scene.materials.size(), 4u);
+  expect_near(scene.materials[0].color, {.1f, .2f, .3f});
+  auto emission = scene.materials[0].emission;
+  EXPECT_GT(emission.z, 0);  // a 6500K blackbody is close to white
+  EXPECT_NEAR(max_component(emission), 1, 1e-5f);
+  EXPECT_GT(min_component(emission), 0.7f);
+  expect_near(scene.materials[1].color, {.4f, .4f, .4f});  // spectrum mean
+  expect_near(scene.materials[2].color, {.25f, .5f, .75f});
+  EXPECT_EQ(scene.materials[3].type, material_type::glossy);
+  EXPECT_NEAR(scene.materials[3].roughness, 0.25f, 1e-6f);  // alpha = .0625 = .25^2
+  ASSERT_EQ(scene.shapes.size(), 4u);
+  EXPECT_EQ(scene.shapes[1].triangles.size(), 1u);
+  expect_near(scene.shapes[1].normals[2], {0, 0, 1});
+  EXPECT_EQ(scene.shapes[1].texcoords[1], vec2f(1, 0));
+  expect_near(scene.shapes[2].normals[0], {0, 0, 1});  // normalized
+  EXPECT_EQ(scene.shapes[2].texcoords.size(), 3u);
+  EXPECT_TRUE(any_contains(warnings, "blackbody"));
+  EXPECT_TRUE(any_contains(warnings, "spectra"));
+}
+
+TEST(pbrtio, ignored_parameters_are_listed_once) {
+  auto dir      = temp_dir{};
+  auto scene    = scene_data{};
+  auto error    = std::string{};
+  auto warnings = std::vector<std::string>{};
+  auto text     = std::string{"WorldBegin\n"};
+  for (auto i = 0; i < 5; i++)
+    text += "Shape \"sphere\" \"float radius\" 1 \"float zmax\" .5 \"integer splitdepth\" 2\n";
+  ASSERT_TRUE(load_text(dir, text, scene, error, &warnings)) << error;
+  auto count = 0;
+  for (auto& warning : warnings) count += contains(warning, "\"float zmax\"") ? 1 : 0;
+  EXPECT_EQ(count, 1);
+  EXPECT_TRUE(any_contains(warnings, "scene.pbrt:2:"));
+  EXPECT_TRUE(any_contains(warnings, "\"integer splitdepth\""));
+}
+
+// -----------------------------------------------------------------------------
+// TRANSFORMS AND CAMERA
+// -----------------------------------------------------------------------------
+
+static frame3f first_instance_frame(const temp_dir& dir, const std::string& transforms) {
+  auto scene = scene_data{};
+  auto error = std::string{};
+  auto text  = "WorldBegin\n" + transforms + "\nShape \"sphere\"\n";
+  EXPECT_TRUE(load_text(dir, text, scene, error)) << error;
+  return scene.instances.empty() ? frame3f{} : scene.instances[0].frame;
+}
+
+TEST(pbrtio, transform_directives) {
+  auto dir = temp_dir{};
+  // Translate then Scale: points are scaled first, then translated.
+  auto frame = first_instance_frame(dir, "Translate 1 2 3 Scale 2 2 2");
+  expect_near(transform_point(frame, {1, 1, 1}), {3, 4, 5});
+  // Rotate about z by 90 degrees: x goes to y.
+  frame = first_instance_frame(dir, "Rotate 90 0 0 1");
+  expect_near(transform_point(frame, {1, 0, 0}), {0, 1, 0});
+  // Transform is column-major with the translation in values 12..14.
+  frame = first_instance_frame(dir, "Transform [ 0 1 0 0  -1 0 0 0  0 0 1 0  5 6 7 1 ]");
+  expect_near(transform_point(frame, {1, 0, 0}), {5, 7, 7});
+  // ConcatTransform composes with the current transform; bare numbers too.
+  frame = first_instance_frame(dir, "Translate 1 0 0 ConcatTransform 2 0 0 0 0 2 0 0 0 0 2 0 0 0 0 1");
+  expect_near(transform_point(frame, {1, 1, 1}), {3, 2, 2});
+  // Identity resets; CoordinateSystem/CoordSysTransform save and restore.
+  frame = first_instance_frame(dir,
+      "Translate 1 0 0 CoordinateSystem \"mine\" Identity Scale 3 3 3 CoordSysTransform \"mine\"");
+  expect_near(transform_point(frame, {0, 0, 0}), {1, 0, 0});
+  expect_near(transform_vector(frame, {1, 1, 1}), {1, 1, 1});
+  // LookAt as a world transform: the eye maps to the origin.
+  frame = first_instance_frame(dir, "LookAt 0 0 5  0 0 0  0 1 0");
+  expect_near(transform_point(frame, {0, 0, 5}), {0, 0, 0});
+}
+
+TEST(pbrtio, attribute_and_transform_scoping) {
+  auto dir   = temp_dir{};
+  auto scene = scene_data{};
+  auto error = std::string{};
+  auto text  = std::string{
+      "WorldBegin\n"
+      "Material \"matte\" \"rgb Kd\" [ 1 0 0 ]\n"
+      "AttributeBegin\n"
+      "  Translate 1 0 0\n"
+      "  Material \"matte\" \"rgb Kd\" [ 0 1 0 ]\n"
+      "  AreaLightSource \"diffuse\" \"rgb L\" [ 4 4 4 ]\n"
+      "  Shape \"sphere\"\n"
+      "  TransformBegin\n"
+      "    Translate 0 1 0\n"
+      "    Material \"matte\" \"rgb Kd\" [ 0 0 1 ]\n"
+      "  TransformEnd\n"
+      "  Shape \"sphere\"\n"  // translate (1,0,0), blue, emissive
+      "AttributeEnd\n"
+      "Shape \"sphere\"\n"};  // identity, red, not emissive
+  ASSERT_TRUE(load_text(dir, text, scene, error)) << error;
+  ASSERT_EQ(scene.instances.size(), 3u);
+  auto material = [&](int i) { return scene.materials[scene.instances[i].material]; };
+  expect_near(scene.instances[0].frame.o, {1, 0, 0});
+  expect_near(material(0).color, {0, 1, 0});
+  expect_near(material(0).emission, {4, 4, 4});
+  expect_near(scene.instances[1].frame.o, {1, 0, 0});  // TransformEnd restored
+  expect_near(material(1).color, {0, 0, 1});           // material is not a transform
+  expect_near(material(1).emission, {4, 4, 4});
+  expect_near(scene.instances[2].frame.o, {0, 0, 0});
+  expect_near(material(2).color, {1, 0, 0});
+  expect_near(material(2).emission, {0, 0, 0});
+}
+
+TEST(pbrtio, lookat_camera_matches_pbrt_image_orientation) {
+  // pbrt: camera at the origin looking along +y with z up. pbrt's camera
+  // space is left-handed with x = cross(up, dir) = -x_world to the image's
+  // right, so a point at world -x appears on the right of pbrt's image.
+  auto dir   = temp_dir{};
+  auto scene = scene_data{};
+  auto error = std::string{};
+  auto text  = std::string{
+      "LookAt 0 0 0  0 10 0  0 0 1\n"
+      "Camera \"perspective\" \"float fov\" 40\n"
+      "Film \"rgb\" \"integer xresolution\" 400 \"integer yresolution\" 200\n"
+      "WorldBegin\n"};
+  ASSERT_TRUE(load_text(dir, text, scene, error)) << error;
+  ASSERT_EQ(scene.cameras.size(), 1u);
+  auto& camera = scene.cameras[0];
+  expect_near(camera.frame.o, {0, 0, 0});
+  expect_near(-camera.frame.z, {0, 1, 0});  // -z from eye to target
+  expect_near(camera.frame.x, {-1, 0, 0});  // image right, as pbrt
+  expect_near(camera.frame.y, {0, 0, 1});   // image up
+  // A ray through the right edge of the image goes towards world -x, and
+  // one through the top edge goes up.
+  auto right = eval_camera(camera, {1, 0.5f}, {0.5f, 0.5f});
+  EXPECT_LT(right.d.x, -0.1f);
+  auto top = eval_camera(camera, {0.5f, 0}, {0.5f, 0.5f});
+  EXPECT_GT(top.d.z, 0.1f);
+  // fov spans the shorter side (the height here): the top-edge ray is 20
+  // degrees above the axis.
+  EXPECT_NEAR(degrees(std::atan2(top.d.z, top.d.y)), 20, 1e-3f);
+  EXPECT_FLOAT_EQ(camera.aspect, 2);
+  EXPECT_FLOAT_EQ(camera.film, 0.036f);
+  EXPECT_EQ(scene.settings.resolution, 400);
+}
+
+TEST(pbrtio, camera_fov_on_portrait_film_and_coordinate_system) {
+  auto dir   = temp_dir{};
+  auto scene = scene_data{};
+  auto error = std::string{};
+  auto text  = std::string{
+      "Scale -1 1 1\n"
+      "LookAt 0 0 -5  0 0 0  0 1 0\n"
+      "Camera \"perspective\" \"float fov\" 30 \"float focaldistance\" 5 \"float lensradius\" .1\n"
+      "Film \"image\" \"integer xresolution\" 100 \"integer yresolution\" 200\n"
+      "WorldBegin\n"
+      "CoordSysTransform \"camera\"\n"
+      "Translate 0 0 5\n"
+      "Shape \"sphere\"\n"};
+  ASSERT_TRUE(load_text(dir, text, scene, error)) << error;
+  auto& camera = scene.cameras[0];
+  // The shorter side is the width: the right-edge ray is 15 degrees off axis
+  // (checked through the pinhole, without the lens).
+  auto pinhole     = camera;
+  pinhole.aperture = 0;
+  auto right       = eval_camera(pinhole, {1, 0.5f}, {0.5f, 0.5f});
+  auto axis  = -camera.frame.z;
+  EXPECT_NEAR(degrees(std::acos(dot(right.d, axis))), 15, 1e-3f);
+  EXPECT_FLOAT_EQ(camera.aspect, 0.5f);
+  EXPECT_FLOAT_EQ(camera.focus, 5);
+  EXPECT_FLOAT_EQ(camera.aperture, 0.2f);
+  // Looking along +z with y up, pbrt's image right is cross(up, dir) = +x;
+  // the `Scale -1 1 1` before LookAt (a common exporter idiom) mirrors it.
+  expect_near(camera.frame.x, {-1, 0, 0});
+  // "camera" coordinates: 5 units ahead of the camera is the world origin.
+  expect_near(scene.instances[0].frame.o, {0, 0, 0});
+}
+
+// -----------------------------------------------------------------------------
+// MATERIALS
+// -----------------------------------------------------------------------------
+
+TEST(pbrtio, hair_material_parameters_and_precedence) {
+  auto dir      = temp_dir{};
+  auto scene    = scene_data{};
+  auto error    = std::string{};
+  auto warnings = std::vector<std::string>{};
+  auto text     = std::string{
+      "WorldBegin\n"
+      "Material \"hair\"\n"
+      "Shape \"sphere\"\n"  // pbrt default: eumelanin 1.3
+      "Material \"hair\" \"float pheomelanin\" 2 \"float eta\" 1.6\n"
+      "Shape \"sphere\"\n"
+      "Material \"hair\" \"rgb color\" [ .2 .8 .3 ] \"float eumelanin\" 5\n"
+      "Shape \"sphere\"\n"
+      "Material \"hair\" \"rgb sigma_a\" [ .1 .2 .3 ] \"rgb reflectance\" [ .5 .5 .5 ]\n"
+      "  \"float beta_m\" .1 \"float beta_n\" .9 \"float alpha\" 3\n"
+      "Shape \"sphere\"\n"
+      "Material \"hair\" \"rgb reflectance\" [ .4 .3 .2 ]\n"
+      "Shape \"sphere\"\n"};
+  ASSERT_TRUE(load_text(dir, text, scene, error, &warnings)) << error;
+  ASSERT_EQ(scene.materials.size(), 5u);
+  auto& h0 = scene.materials[0].hair;
+  EXPECT_FALSE(h0.has_sigma_a || h0.has_color);
+  EXPECT_FLOAT_EQ(h0.eumelanin, 1.3f);
+  EXPECT_FLOAT_EQ(h0.pheomelanin, 0);
+  auto& h1 = scene.materials[1].hair;
+  EXPECT_FLOAT_EQ(h1.eumelanin, 0);
+  EXPECT_FLOAT_EQ(h1.pheomelanin, 2);
+  EXPECT_FLOAT_EQ(h1.eta, 1.6f);
+  auto& h2 = scene.materials[2].hair;
+  EXPECT_TRUE(h2.has_color);
+  EXPECT_FALSE(h2.has_sigma_a);
+  expect_near(h2.color, {.2f, .8f, .3f});
+  auto& h3 = scene.materials[3].hair;
+  EXPECT_TRUE(h3.has_sigma_a);
+  EXPECT_FALSE(h3.has_color);
+  expect_near(h3.sigma_a, {.1f, .2f, .3f});
+  EXPECT_FLOAT_EQ(h3.beta_m, .1f);
+  EXPECT_FLOAT_EQ(h3.beta_n, .9f);
+  EXPECT_FLOAT_EQ(h3.alpha, 3);
+  EXPECT_TRUE(scene.materials[4].hair.has_color);  // v4 name of the colour
+  expect_near(scene.materials[4].hair.color, {.4f, .3f, .2f});
+  // Parameters overridden by precedence are not reported as ignored.
+  EXPECT_FALSE(any_contains(warnings, "eumelanin"));
+}
+
+TEST(pbrtio, other_materials_map_to_nearest) {
+  auto dir      = temp_dir{};
+  auto scene    = scene_data{};
+  auto error    = std::string{};
+  auto warnings = std::vector<std::string>{};
+  auto text     = std::string{
+      "WorldBegin\n"
+      "Shape \"sphere\"\n"  // default material
+      "Material \"plastic\" \"rgb Kd\" [ .1 .2 .3 ] \"float roughness\" 0\n"
+      "Shape \"sphere\"\n"
+      "Material \"coateddiffuse\" \"rgb reflectance\" [ .9 .6 .1 ] \"float roughness\" .01\n"
+      "Shape \"sphere\"\n"
+      "Material \"conductor\" \"spectrum eta\" \"metal-Cu-eta\"\n"
+      "Shape \"sphere\"\n"
+      "Material \"translucent\"\n"
+      "Shape \"sphere\"\n"};
+  ASSERT_TRUE(load_text(dir, text, scene, error, &warnings)) << error;
+  ASSERT_EQ(scene.materials.size(), 5u);
+  EXPECT_EQ(scene.materials[0].type, material_type::matte);
+  expect_near(scene.materials[0].color, {.5f, .5f, .5f});
+  EXPECT_EQ(scene.materials[1].type, material_type::glossy);
+  expect_near(scene.materials[1].color, {.1f, .2f, .3f});
+  EXPECT_EQ(scene.materials[2].type, material_type::glossy);
+  // pbrt-v4 remaps roughness .01 to alpha .1; Yocto's alpha is roughness^2.
+  EXPECT_NEAR(scene.materials[2].roughness, std::sqrt(0.1f), 1e-6f);
+  EXPECT_EQ(scene.materials[3].type, material_type::glossy);
+  EXPECT_EQ(scene.materials[4].type, material_type::matte);
+  EXPECT_TRUE(any_contains(warnings, "\"conductor\" is not supported"));
+  EXPECT_TRUE(any_contains(warnings, "\"translucent\" is not supported"));
+}
+
+TEST(pbrtio, texture_parameters_warn_and_use_a_constant) {
+  auto dir      = temp_dir{};
+  auto scene    = scene_data{};
+  auto error    = std::string{};
+  auto warnings = std::vector<std::string>{};
+  auto text     = std::string{
+      "WorldBegin\n"
+      "Texture \"checks\" \"spectrum\" \"checkerboard\" \"float uscale\" 4\n"
+      "Material \"diffuse\" \"texture reflectance\" \"checks\"\n"
+      "Shape \"sphere\"\n"};
+  ASSERT_TRUE(load_text(dir, text, scene, error, &warnings)) << error;
+  expect_near(scene.materials[0].color, {.5f, .5f, .5f});
+  EXPECT_TRUE(any_contains(warnings, "texture \"checks\""));
+}
+
+// -----------------------------------------------------------------------------
+// LIGHTS
+// -----------------------------------------------------------------------------
+
+TEST(pbrtio, distant_and_constant_infinite_lights) {
+  auto dir   = temp_dir{};
+  auto scene = scene_data{};
+  auto error = std::string{};
+  auto text  = std::string{
+      "WorldBegin\n"
+      "LightSource \"distant\" \"point from\" [ 0 0 0 ] \"point to\" [ 0 0 -2 ] "
+      "\"rgb L\" [ 2 2 2 ] \"float scale\" 3\n"
+      "AttributeBegin\n"
+      "Rotate 90 1 0 0\n"
+      "LightSource \"distant\" \"point3 from\" [ 0 0 1 ] \"point3 to\" [ 0 0 0 ]\n"
+      "AttributeEnd\n"
+      "LightSource \"infinite\" \"rgb L\" [ .5 .6 .7 ] \"rgb scale\" [ 2 2 2 ]\n"};
+  ASSERT_TRUE(load_text(dir, text, scene, error)) << error;
+  ASSERT_EQ(scene.distant_lights.size(), 2u);
+  expect_near(scene.distant_lights[0].direction, {0, 0, 1});
+  expect_near(scene.distant_lights[0].emission, {6, 6, 6});
+  expect_near(scene.distant_lights[1].direction, {0, -1, 0});  // z rotated about x
+  expect_near(scene.distant_lights[1].emission, {1, 1, 1});
+  ASSERT_EQ(scene.environments.size(), 1u);
+  expect_near(scene.environments[0].emission, {1, 1.2f, 1.4f});
+  EXPECT_EQ(scene.environments[0].emission_tex, -1);
+}
+
+// Radiance encoding a pbrt light-space direction, for the map tests.
+static vec3f direction_color(const vec3f& d) { return (d + vec3f{1, 1, 1}) / 2.0f; }
+
+TEST(pbrtio, equirect_map_keeps_pbrt_directions) {
+  // A pbrt-v3 equirect map: pixel (s, t) holds the direction pbrt assigns to
+  // it (phi = 2 pi s around z, theta = pi t from +z). After import, the
+  // environment must return that colour for the world direction pbrt uses.
+  auto dir   = temp_dir{};
+  auto image = texture_data{256, 128, {}};
+  for (auto j = 0; j < image.height; j++) {
+    for (auto i = 0; i < image.width; i++) {
+      auto phi = 2 * pif * (i + 0.5f) / image.width, theta = pif * (j + 0.5f) / image.height;
+      auto d   = vec3f{std::sin(theta) * std::cos(phi), std::sin(theta) * std::sin(phi),
+          std::cos(theta)};
+      image.pixels.push_back(direction_color(d));
+    }
+  }
+  auto error = std::string{};
+  fs::create_directories(dir / "maps");
+  ASSERT_TRUE(save_image(dir / "maps/sky.exr", image, error)) << error;
+  auto scene = scene_data{};
+  auto text  = std::string{
+      "WorldBegin\nAttributeBegin\nRotate -55 1 0 0\nRotate 90 0 0 1\n"
+      "LightSource \"infinite\" \"string mapname\" \"maps/sky.exr\"\nAttributeEnd\n"};
+  ASSERT_TRUE(load_text(dir, text, scene, error)) << error;
+  ASSERT_EQ(scene.environments.size(), 1u);
+  ASSERT_EQ(scene.environments[0].emission_tex, 0);
+  auto light_to_world = rotation_frame({1, 0, 0}, radians(-55)) *
+                        rotation_frame({0, 0, 1}, radians(90));
+  // Directions away from the poles and the seam; bilinear error < 0.02.
+  for (auto world : {vec3f{0.3f, 0.5f, 0.8f}, vec3f{-0.7f, 0.1f, 0.2f}, vec3f{0.1f, -0.9f, -0.3f}}) {
+    world      = normalize(world);
+    auto local = transform_direction(inverse(light_to_world, false), world);
+    expect_near(eval_environment(scene, scene.environments[0], world), direction_color(local),
+        0.02f);
+  }
+}
+
+TEST(pbrtio, equal_area_map_is_converted_to_equirect) {
+  // The same check for a pbrt-v4 equal-area octahedral map.
+  auto dir   = temp_dir{};
+  auto image = texture_data{128, 128, {}};
+  for (auto j = 0; j < image.height; j++)
+    for (auto i = 0; i < image.width; i++)
+      image.pixels.push_back(direction_color(equal_area_square_to_sphere(
+          {(i + 0.5f) / image.width, (j + 0.5f) / image.height})));
+  auto error = std::string{};
+  ASSERT_TRUE(save_image(dir / "sky.exr", image, error)) << error;
+  auto scene = scene_data{};
+  auto text  = std::string{
+      "WorldBegin\nAttributeBegin\nRotate -120 1 0 0\nRotate 120 0 0 1\n"
+      "LightSource \"infinite\" \"string filename\" \"sky.exr\" \"float scale\" 2\n"
+      "AttributeEnd\n"};
+  ASSERT_TRUE(load_text(dir, text, scene, error)) << error;
+  ASSERT_EQ(scene.environments[0].emission_tex, 0);
+  EXPECT_EQ(scene.textures[0].width, 2 * scene.textures[0].height);
+  auto light_to_world = rotation_frame({1, 0, 0}, radians(-120)) *
+                        rotation_frame({0, 0, 1}, radians(120));
+  for (auto world : {vec3f{0.3f, 0.5f, 0.8f}, vec3f{-0.7f, 0.1f, 0.2f}, vec3f{0.1f, -0.9f, -0.3f}}) {
+    world      = normalize(world);
+    auto local = transform_direction(inverse(light_to_world, false), world);
+    expect_near(eval_environment(scene, scene.environments[0], world),
+        2.0f * direction_color(local), 0.05f);
+  }
+}
+
+TEST(pbrtio, missing_environment_map_falls_back_to_constant) {
+  auto dir      = temp_dir{};
+  auto scene    = scene_data{};
+  auto error    = std::string{};
+  auto warnings = std::vector<std::string>{};
+  auto text     = std::string{
+      "WorldBegin\nLightSource \"infinite\" \"string filename\" \"textures/none.exr\" "
+      "\"float scale\" 1.5\n"};
+  ASSERT_TRUE(load_text(dir, text, scene, error, &warnings)) << error;
+  ASSERT_EQ(scene.environments.size(), 1u);
+  EXPECT_EQ(scene.environments[0].emission_tex, -1);
+  expect_near(scene.environments[0].emission, {1.5f, 1.5f, 1.5f});
+  EXPECT_TRUE(any_contains(warnings, "none.exr"));
+}
+
+TEST(pbrtio, equal_area_mapping_round_trip) {
+  // Deterministic grid over the square: square -> sphere -> square.
+  for (auto j = 0; j < 64; j++) {
+    for (auto i = 0; i < 64; i++) {
+      auto uv = vec2f{(i + 0.5f) / 64, (j + 0.5f) / 64};
+      auto d  = equal_area_square_to_sphere(uv);
+      EXPECT_NEAR(length(d), 1, 1e-5f);
+      auto back = equal_area_sphere_to_square(d);
+      EXPECT_NEAR(back.x, uv.x, 1e-4f);
+      EXPECT_NEAR(back.y, uv.y, 1e-4f);
+    }
+  }
+  // The centre is +z, the corners -z.
+  expect_near(equal_area_square_to_sphere({0.5f, 0.5f}), {0, 0, 1});
+  expect_near(equal_area_square_to_sphere({0, 0}), {0, 0, -1});
+}
+
+// -----------------------------------------------------------------------------
+// SHAPES
+// -----------------------------------------------------------------------------
+
+TEST(pbrtio, curves_are_chained_and_grouped) {
+  auto dir   = temp_dir{};
+  auto scene = scene_data{};
+  auto error = std::string{};
+  auto text  = std::string{"WorldBegin\nMaterial \"hair\"\n"};
+  // Two strands of three chained curves (v3 syntax), one v4 curve in another
+  // material, then one curve under another transform.
+  text += strands_text(2, 3, "point");
+  text += "AttributeBegin\nMaterial \"hair\" \"float eumelanin\" 8\n";
+  text += curve_text({0, 0, 0}, {1, 0, 0}, {2, 0, 0}, {3, 0, 0}, 0.2f, 0.2f);
+  text += "AttributeEnd\nAttributeBegin\nTranslate 0 0 1\n";
+  text += curve_text({0, 0, 0}, {1, 0, 0}, {2, 0, 0}, {3, 0, 0}, 0.2f, 0.2f);
+  text += "AttributeEnd\n";
+  text += strands_text(1, 2, "point3", {5, 0, 0});  // back to the first group
+  ASSERT_TRUE(load_text(dir, text, scene, error)) << error;
+  ASSERT_EQ(scene.shapes.size(), 3u);
+  ASSERT_EQ(scene.instances.size(), 3u);
+  auto& hair = scene.shapes[0];
+  EXPECT_EQ(hair.curves.size(), 8u);
+  // Chained: 3 strands, each with 1 + 3 * segments vertices.
+  EXPECT_EQ(hair.positions.size(), (size_t)(2 * (1 + 3 * 3) + (1 + 3 * 2)));
+  EXPECT_EQ(hair.curves[1].x, hair.curves[0].w);
+  EXPECT_EQ(hair.curves[2].x, hair.curves[1].w);
+  EXPECT_NE(hair.curves[3].x, hair.curves[2].w);  // a new strand
+  EXPECT_EQ(hair.radius.size(), hair.positions.size());
+  // Radius = width / 2, linear from width0 to width1 along the control points.
+  EXPECT_FLOAT_EQ(hair.radius[hair.curves[0].x], 0.005f);
+  EXPECT_FLOAT_EQ(hair.radius[hair.curves[0].y], (2 * 0.005f + 0.004f) / 3);
+  EXPECT_FLOAT_EQ(hair.radius[hair.curves[0].w], 0.004f);
+  EXPECT_EQ(scene.shapes[1].curves.size(), 1u);
+  EXPECT_EQ(scene.shapes[2].curves.size(), 1u);
+  EXPECT_NE(scene.instances[0].material, scene.instances[1].material);
+  EXPECT_EQ(scene.instances[0].material, scene.instances[2].material);
+  expect_near(scene.instances[2].frame.o, {0, 0, 1});
+  EXPECT_FLOAT_EQ(scene.shapes[1].radius[0], 0.1f);
+}
+
+TEST(pbrtio, curve_variants) {
+  auto dir      = temp_dir{};
+  auto scene    = scene_data{};
+  auto error    = std::string{};
+  auto warnings = std::vector<std::string>{};
+  auto text     = std::string{
+      "WorldBegin\n"
+      // Two Bezier segments in one curve, `width` for both ends, ribbon.
+      "Shape \"curve\" \"point P\" [ 0 0 0 1 0 0 2 0 0 3 0 0 4 0 0 5 0 0 6 0 0 ] "
+      "\"float width\" .5 \"string type\" \"ribbon\" \"normal N\" [ 0 0 1 0 0 1 0 0 1 ] "
+      "\"integer splitdepth\" 3\n"
+      // A uniform cubic b-spline (pbrt-v4): one segment.
+      "Shape \"curve\" \"point3 P\" [ 0 0 0 6 0 0 12 0 0 18 0 0 ] \"string basis\" \"bspline\"\n"};
+  ASSERT_TRUE(load_text(dir, text, scene, error, &warnings)) << error;
+  ASSERT_EQ(scene.shapes.size(), 1u);
+  auto& shape = scene.shapes[0];
+  ASSERT_EQ(shape.curves.size(), 3u);
+  EXPECT_EQ(shape.curves[1].x, shape.curves[0].w);
+  EXPECT_FLOAT_EQ(shape.radius[0], 0.25f);
+  auto b = shape.curves[2];
+  expect_near(shape.positions[b.x], {6, 0, 0});  // (p0 + 4 p1 + p2) / 6
+  expect_near(shape.positions[b.w], {12, 0, 0});
+  EXPECT_TRUE(any_contains(warnings, "ribbon"));
+  EXPECT_TRUE(any_contains(warnings, "splitdepth"));
+}
+
+TEST(pbrtio, sphere_disk_and_plymesh) {
+  auto dir   = temp_dir{};
+  auto error = std::string{};
+  auto ply   = shape_data{};
+  ply.positions = {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}};
+  ply.triangles = {{0, 1, 2}, {0, 2, 3}};
+  fs::create_directories(dir / "meshes");
+  ASSERT_TRUE(save_shape(dir / "meshes/quad.ply", ply, error)) << error;
+  write_text(dir / "sub/part.pbrt", "Shape \"plymesh\" \"string filename\" \"../meshes/quad.ply\"\n");
+  auto scene = scene_data{};
+  auto text  = std::string{
+      "WorldBegin\n"
+      "Shape \"sphere\" \"float radius\" 2\n"
+      "Shape \"disk\" \"float radius\" 3 \"float height\" 1\n"
+      "Shape \"disk\" \"float radius\" 3 \"float innerradius\" 1\n"
+      "Include \"sub/part.pbrt\"\n"};
+  ASSERT_TRUE(load_text(dir, text, scene, error)) << error;
+  ASSERT_EQ(scene.shapes.size(), 4u);
+  auto& sphere = scene.shapes[0];
+  EXPECT_EQ(sphere.normals.size(), sphere.positions.size());
+  for (auto i = 0; i < (int)sphere.positions.size(); i += 97)
+    EXPECT_NEAR(length(sphere.positions[i]), 2, 1e-5f);
+  // Triangles face outwards.
+  for (auto& t : sphere.triangles) {
+    auto& p = sphere.positions;
+    auto  n = cross(p[t.y] - p[t.x], p[t.z] - p[t.x]);
+    ASSERT_GT(length(n), 0);
+    EXPECT_GT(dot(n, p[t.x] + p[t.y] + p[t.z]), 0);
+  }
+  auto& disk = scene.shapes[1];
+  for (auto& p : disk.positions) EXPECT_FLOAT_EQ(p.z, 1);
+  EXPECT_EQ(disk.triangles.size(), 64u);
+  for (auto& p : scene.shapes[2].positions) EXPECT_GE(length(p), 1 - 1e-5f);
+  EXPECT_EQ(scene.shapes[3].triangles.size(), 2u);
+}
+
+TEST(pbrtio, curves_as_lines) {
+  auto dir    = temp_dir{};
+  auto scene  = scene_data{};
+  auto error  = std::string{};
+  auto params = pbrt_params{};
+  params.curves_as_lines = true;
+  params.segments        = 2;
+  auto text = "WorldBegin\n" + strands_text(2, 3, "point3");
+  ASSERT_TRUE(load_text(dir, text, scene, error, nullptr, params)) << error;
+  ASSERT_EQ(scene.shapes.size(), 1u);
+  auto& lines = scene.shapes[0];
+  EXPECT_TRUE(lines.curves.empty());
+  EXPECT_EQ(lines.lines.size(), (size_t)(2 * 3 * 2));
+  // Shared joints: each strand is one polyline of 3 * 2 + 1 vertices.
+  EXPECT_EQ(lines.positions.size(), (size_t)(2 * (3 * 2 + 1)));
+  for (auto i = 1; i < 6; i++) EXPECT_EQ(lines.lines[i].x, lines.lines[i - 1].y);
+  EXPECT_EQ(lines.radius.size(), lines.positions.size());
+}
+
+TEST(pbrtio, curves_to_lines_follows_the_bezier) {
+  auto curves      = shape_data{};
+  curves.positions = {{0, 0, 0}, {1, 1, 0}, {2, 1, 0}, {3, 0, 0}, {4, -1, 0}, {5, -1, 0},
+      {6, 0, 0}};
+  curves.radius    = {1, 1, 1, 1, 2, 2, 2};
+  curves.curves    = {{0, 1, 2, 3}, {3, 4, 5, 6}};
+  auto lines       = curves_to_lines(curves, 4);
+  EXPECT_EQ(lines.lines.size(), 8u);
+  EXPECT_EQ(lines.positions.size(), 9u);
+  expect_near(lines.positions[lines.lines[1].y], eval_bezier(curves.positions[0],
+                                                     curves.positions[1], curves.positions[2],
+                                                     curves.positions[3], 0.5f));
+  expect_near(lines.positions[lines.lines[7].y], {6, 0, 0});
+  EXPECT_FLOAT_EQ(lines.radius[lines.lines[7].y], 2);
+}
+
+// -----------------------------------------------------------------------------
+// INCLUDES
+// -----------------------------------------------------------------------------
+
+TEST(pbrtio, nested_and_gzip_includes_relative_to_the_including_file) {
+  auto dir = temp_dir{};
+  write_text(dir / "a/first.pbrt",
+      "MakeNamedMaterial \"red\" \"string type\" \"diffuse\" \"rgb reflectance\" [1 0 0]\n"
+      "Include \"b/second.pbrt.gz\"\n");
+  write_gz(dir / "a/b/second.pbrt.gz",
+      "NamedMaterial \"red\"\n" + strands_text(3, 2, "point3") + "Import \"../third.pbrt\"\n");
+  write_text(dir / "a/third.pbrt", "Shape \"sphere\"\n");
+  auto scene = scene_data{};
+  auto error = std::string{};
+  ASSERT_TRUE(load_text(dir, "WorldBegin\nInclude \"a/first.pbrt\"\n", scene, error)) << error;
+  EXPECT_EQ(count_curves(scene), 6);
+  ASSERT_EQ(scene.shapes.size(), 2u);
+  ASSERT_EQ(scene.materials.size(), 1u);  // named materials cross includes
+  expect_near(scene.materials[0].color, {1, 0, 0});
+  EXPECT_EQ(scene.material_names[0], "red");
+  // A whole gzip'd scene loads too.
+  write_gz(dir / "whole.pbrt.gz", "WorldBegin\nShape \"sphere\"\n");
+  ASSERT_TRUE(load_pbrt_scene(dir / "whole.pbrt.gz", scene, error)) << error;
+  EXPECT_EQ(scene.shapes.size(), 1u);
+}
+
+// -----------------------------------------------------------------------------
+// BAD INPUT
+// -----------------------------------------------------------------------------
+
+// Loads `text` and expects an error containing every part.
+static void expect_error(const temp_dir& dir, const std::string& text,
+    std::initializer_list<std::string> parts, const pbrt_params& params = {}) {
+  auto scene = scene_data{};
+  auto error = std::string{};
+  EXPECT_FALSE(load_text(dir, text, scene, error, nullptr, params)) << text;
+  for (auto& part : parts) EXPECT_TRUE(contains(error, part)) << error << "\nmissing: " << part;
+  EXPECT_TRUE(scene.shapes.empty() && scene.cameras.empty());
+  EXPECT_EQ(error.find('\n'), std::string::npos) << error;
+}
+
+TEST(pbrtio, bad_input_names_file_line_and_directive) {
+  auto dir = temp_dir{};
+  expect_error(dir, "WorldBegin\nShape \"sphere\n\"float radius\" 1\n",
+      {"scene.pbrt:2:", "unterminated string"});
+  expect_error(dir, "WorldBegin\nShape \"sphere\" \"float radius\" [ 1\n",
+      {"scene.pbrt:3:", "Shape \"sphere\"", "unterminated ["});
+  expect_error(dir, "WorldBegin\nShape \"sphere\" \"float radius\" [ 1 \"two\" ]\n",
+      {"scene.pbrt:2:", "expected a number"});
+  expect_error(dir, "WorldBegin\nShape \"sphere\" \"integer radius\" 1\n",
+      {"scene.pbrt:2:", "\"integer radius\" should be a float"});
+  expect_error(dir, "Sampler \"halton\" \"integer pixelsamples\" 1.5\n", {"expected an integer"});
+  expect_error(dir, "WorldBegin\nShape \"sphere\" \"float radius\" 1e99\n", {"expected a number"});
+  expect_error(dir, "WorldBegin\nShape \"sphere\" \"vec5 radius\" 1\n",
+      {"unknown parameter type \"vec5\""});
+  expect_error(dir, "WorldBegin\nShape \"sphere\" \"radius\" 1\n", {"bad parameter declaration"});
+  expect_error(dir, "WorldBegin\nMaterial \"hair\" \"bool eumelanin\" 3\n", {"true or false"});
+  expect_error(dir, "Translate 1 2\nWorldBegin\n", {"scene.pbrt:2:", "Translate", "3 numbers"});
+  expect_error(dir, "WorldBegin\n\nBogus 1 2 3\n", {"scene.pbrt:3:", "Bogus", "unknown directive"});
+  expect_error(dir, "WorldBegin\n[ 1 ]\n", {"scene.pbrt:2:", "expected a directive"});
+  expect_error(dir, "WorldBegin\nAttributeEnd\n", {"no matching AttributeBegin"});
+  expect_error(dir, "WorldBegin\nAttributeBegin\nTransformEnd\n", {"mismatched block", "line 2"});
+  expect_error(dir, "WorldBegin\nNamedMaterial \"nope\"\n", {"unknown material \"nope\""});
+  expect_error(dir, "WorldBegin\nShape \"curve\" \"point P\" [ 0 0 0 1 1 1 ]\n",
+      {"Shape \"curve\"", "4 + 3n control points"});
+  expect_error(dir, "WorldBegin\nShape \"curve\" \"point P\" [ 0 0 0 1 1 1 2 2 ]\n",
+      {"multiple of 3"});
+  expect_error(dir, "WorldBegin\nShape \"trianglemesh\" \"point P\" [0 0 0 1 0 0 0 1 0] "
+                    "\"integer indices\" [0 1 3]\n",
+      {"index 3", "out of range"});
+  expect_error(dir, "WorldBegin\nShape \"plymesh\" \"string filename\" \"missing.ply\"\n",
+      {"scene.pbrt:2:", "Shape \"plymesh\"", "missing.ply"});
+  expect_error(dir, "LookAt 0 0 0 0 0 1 0 0 1\n", {"LookAt", "parallel"});
+  expect_error(dir, "Transform [ 1 0 0 1 0 1 0 0 0 0 1 0 0 0 0 1 ]\n", {"projective"});
+  expect_error(dir, "Scale 0 1 1\nCamera \"perspective\"\n", {"singular"});
+  expect_error(dir, "WorldBegin\nMaterial \"hair\" \"float beta_m\" 2\n", {"beta_m"});
+}
+
+TEST(pbrtio, unknown_directives_are_warnings_when_lenient) {
+  auto dir      = temp_dir{};
+  auto scene    = scene_data{};
+  auto error    = std::string{};
+  auto warnings = std::vector<std::string>{};
+  auto params   = pbrt_params{};
+  params.lenient = true;
+  auto text = std::string{
+      "WorldBegin\nObjectBegin \"thing\" \"float x\" [ 1 2 ] \"bool b\" true\n"
+      "Shape \"sphere\"\nObjectEnd\n"};
+  ASSERT_TRUE(load_text(dir, text, scene, error, &warnings, params)) << error;
+  EXPECT_TRUE(any_contains(warnings, "scene.pbrt:2: unknown directive ObjectBegin"));
+  EXPECT_EQ(scene.shapes.size(), 1u);
+}
+
+TEST(pbrtio, include_errors) {
+  auto dir = temp_dir{};
+  // Missing include: the including file and line.
+  expect_error(dir, "WorldBegin\n\nInclude \"models/none.pbrt\"\n",
+      {"scene.pbrt:3:", "Include", "models/none.pbrt"});
+  // Cycle through two files.
+  write_text(dir / "x.pbrt", "Include \"y.pbrt\"\n");
+  write_text(dir / "y.pbrt", "\nInclude \"x.pbrt\"\n");
+  expect_error(dir, "Include \"x.pbrt\"\n", {"y.pbrt:2:", "include cycle", "x.pbrt"});
+  // A self-include.
+  expect_error(dir, "Include \"scene.pbrt\"\n", {"include cycle"});
+  // Errors inside an included file name that file.
+  write_text(dir / "bad.pbrt", "Shape \"sphere\"\nShape \"sphere\" \"float radius\" x\n");
+  expect_error(dir, "WorldBegin\nInclude \"bad.pbrt\"\n", {"bad.pbrt:2:", "expected a"});
+  // A truncated gzip include is an error, not a short file.
+  auto text = "WorldBegin\n" + strands_text(200, 3, "point3");
+  write_gz(dir / "full.pbrt.gz", text);
+  auto size = fs::file_size(dir / "full.pbrt.gz");
+  fs::resize_file(dir / "full.pbrt.gz", size / 2);
+  expect_error(dir, "Include \"full.pbrt.gz\"\n", {"full.pbrt.gz", "truncated"});
+  // A gzip whose data is corrupt.
+  write_gz(dir / "corrupt.pbrt.gz", text);
+  auto stream = std::fstream(dir / "corrupt.pbrt.gz", std::ios::in | std::ios::out | std::ios::binary);
+  stream.seekp((std::streamoff)(size / 2));
+  stream.write("\xff\xff\xff\xff\xff\xff\xff\xff", 8);
+  stream.close();
+  expect_error(dir, "Include \"corrupt.pbrt.gz\"\n", {"corrupt.pbrt.gz"});
+}
+
+// -----------------------------------------------------------------------------
+// .HAIR FILES
+// -----------------------------------------------------------------------------
+
+// Writes a .hair file with the given header fields and arrays.
+static void write_hair(const std::string& filename, uint32_t strands, uint32_t points,
+    uint32_t flags, uint32_t default_segments, const std::vector<uint16_t>& segments,
+    const std::vector<float>& positions, const std::vector<float>& thickness = {},
+    const std::vector<float>& colors = {}) {
+  auto data = std::string("HAIR", 4);
+  auto put  = [&](const void* value, size_t size) { data.append((const char*)value, size); };
+  auto default_thickness = 0.1f, default_transparency = 0.0f;
+  float default_color[3] = {0.5f, 0.4f, 0.3f};
+  put(&strands, 4);
+  put(&points, 4);
+  put(&flags, 4);
+  put(&default_segments, 4);
+  put(&default_thickness, 4);
+  put(&default_transparency, 4);
+  put(default_color, 12);
+  data.resize(128, '\0');
+  put(segments.data(), segments.size() * 2);
+  put(positions.data(), positions.size() * 4);
+  put(thickness.data(), thickness.size() * 4);
+  put(colors.data(), colors.size() * 4);
+  write_text(filename, data);
+}
+
+TEST(pbrtio, hair_model_catmull_rom_through_points) {
+  auto dir = temp_dir{};
+  // Two strands: 3 segments and 1 segment, with thickness and colour arrays.
+  auto positions = std::vector<float>{0, 0, 0, 1, 0, 0, 2, 1, 0, 3, 1, 0, 0, 5, 0, 0, 6, 0};
+  auto thickness = std::vector<float>{.4f, .3f, .2f, .1f, .2f, .2f};
+  auto colors    = std::vector<float>(18, 0.25f);
+  write_hair(dir / "model.hair", 2, 6, 1 | 2 | 4 | 16, 0, {3, 1}, positions, thickness, colors);
+  auto shape = shape_data{};
+  auto error = std::string{};
+  auto color = vec3f{0, 0, 0};
+  ASSERT_TRUE(load_hair_model(dir / "model.hair", shape, error, &color)) << error;
+  ASSERT_EQ(shape.curves.size(), 4u);
+  expect_near(color, {.25f, .25f, .25f});
+  // The curve passes through the points, with radius = thickness / 2.
+  expect_near(shape.positions[shape.curves[1].x], {1, 0, 0});
+  expect_near(shape.positions[shape.curves[1].w], {2, 1, 0});
+  EXPECT_FLOAT_EQ(shape.radius[shape.curves[1].x], 0.15f);
+  EXPECT_EQ(shape.curves[1].x, shape.curves[0].w);
+  // Catmull-Rom: the tangent at point 1 is (p2 - p0) / 2, so the first
+  // inner control point of curve 1 is p1 + (p2 - p0) / 6.
+  expect_near(shape.positions[shape.curves[1].y], vec3f{1, 0, 0} + vec3f{2, 1, 0} / 6.0f);
+  // C1 continuity at the joint.
+  auto d_out = shape.positions[shape.curves[1].y] - shape.positions[shape.curves[1].x];
+  auto d_in  = shape.positions[shape.curves[0].w] - shape.positions[shape.curves[0].z];
+  expect_near(d_out, d_in);
+  expect_near(shape.positions[shape.curves[3].w], {0, 6, 0});
+}
+
+TEST(pbrtio, hair_model_round_trip_and_scene) {
+  auto dir = temp_dir{};
+  // Default segments (no segments array), default thickness, no colour.
+  auto positions = std::vector<float>{};
+  for (auto s = 0; s < 3; s++)
+    for (auto k = 0; k < 5; k++) positions.insert(positions.end(), {(float)s, (float)k, 0.1f * k});
+  write_hair(dir / "a.hair", 3, 15, 2, 4, {}, positions);
+  auto shape = shape_data{};
+  auto error = std::string{};
+  auto color = vec3f{};
+  ASSERT_TRUE(load_hair_model(dir / "a.hair", shape, error, &color)) << error;
+  EXPECT_EQ(shape.curves.size(), 12u);
+  EXPECT_FLOAT_EQ(shape.radius[0], 0.05f);
+  expect_near(color, {.5f, .4f, .3f});  // header default
+  ASSERT_TRUE(save_hair_model(dir / "b.hair", shape, error)) << error;
+  auto again = shape_data{};
+  ASSERT_TRUE(load_hair_model(dir / "b.hair", again, error)) << error;
+  EXPECT_EQ(again.positions, shape.positions);
+  EXPECT_EQ(again.radius, shape.radius);
+  EXPECT_EQ(again.curves, shape.curves);
+  // Lines save too: the strand's vertices become its points.
+  auto lines = curves_to_lines(shape, 2);
+  ASSERT_TRUE(save_hair_model(dir / "c.hair", lines, error)) << error;
+  ASSERT_TRUE(load_hair_model(dir / "c.hair", again, error)) << error;
+  EXPECT_EQ(again.curves.size(), 24u);
+  // The scene: shape, hair material, instance, camera, environment.
+  auto scene  = scene_data{};
+  auto params = pbrt_params{};
+  ASSERT_TRUE(load_hair_scene(dir / "a.hair", scene, error, params)) << error;
+  EXPECT_EQ(scene.shapes.size(), 1u);
+  EXPECT_EQ(scene.materials[0].type, material_type::hair);
+  EXPECT_FALSE(scene.materials[0].hair.has_color);
+  EXPECT_EQ(scene.cameras.size(), 1u);
+  EXPECT_EQ(scene.environments.size(), 1u);
+  EXPECT_TRUE(validate_scene(scene, error)) << error;
+  params.curves_as_lines = true;
+  ASSERT_TRUE(load_hair_scene(dir / "a.hair", scene, error, params)) << error;
+  EXPECT_EQ(scene.shapes[0].lines.size(), 48u);
+}
+
+TEST(pbrtio, bad_hair_files) {
+  auto dir   = temp_dir{};
+  auto shape = shape_data{};
+  auto error = std::string{};
+  auto positions = std::vector<float>{0, 0, 0, 1, 0, 0, 2, 0, 0};
+  // Truncated header.
+  write_text(dir / "short.hair", std::string("HAIR\1\0\0\0", 8));
+  EXPECT_FALSE(load_hair_model(dir / "short.hair", shape, error));
+  EXPECT_TRUE(contains(error, "short.hair") && contains(error, "byte 8")) << error;
+  // Bad signature.
+  write_hair(dir / "sig.hair", 1, 3, 2, 2, {}, positions);
+  {
+    auto stream = std::fstream(dir / "sig.hair", std::ios::in | std::ios::out | std::ios::binary);
+    stream.write("HAIX", 4);
+  }
+  EXPECT_FALSE(load_hair_model(dir / "sig.hair", shape, error));
+  EXPECT_TRUE(contains(error, "signature")) << error;
+  // Absurd counts: four billion points in a 164-byte file, no allocation.
+  write_hair(dir / "absurd.hair", 1, 4000000000u, 2, 2, {}, positions);
+  EXPECT_FALSE(load_hair_model(dir / "absurd.hair", shape, error));
+  EXPECT_TRUE(contains(error, "truncated at byte 164") && contains(error, "4000000000")) << error;
+  // Truncated arrays.
+  write_hair(dir / "cut.hair", 1, 3, 2 | 4, 2, {}, positions, {1, 1});
+  EXPECT_FALSE(load_hair_model(dir / "cut.hair", shape, error));
+  EXPECT_TRUE(contains(error, "cut.hair: truncated at byte 172")) << error;
+  // Segments that do not add up to the point count.
+  write_hair(dir / "sum.hair", 1, 3, 1 | 2, 0, {5}, positions);
+  EXPECT_FALSE(load_hair_model(dir / "sum.hair", shape, error));
+  EXPECT_TRUE(contains(error, "add up to 6 points")) << error;
+  // Not finite.
+  write_hair(dir / "nan.hair", 1, 3, 2, 2, {}, {0, 0, 0, NAN, 0, 0, 2, 0, 0});
+  EXPECT_FALSE(load_hair_model(dir / "nan.hair", shape, error));
+  EXPECT_TRUE(contains(error, "point 1 at byte 140")) << error;
+  // No points array.
+  write_hair(dir / "nopoints.hair", 1, 3, 0, 2, {}, {});
+  EXPECT_FALSE(load_hair_model(dir / "nopoints.hair", shape, error));
+  // Saving an empty shape fails and leaves no file.
+  EXPECT_FALSE(save_hair_model(dir / "empty.hair", shape_data{}, error));
+  EXPECT_FALSE(fs::exists(dir / "empty.hair"));
+  EXPECT_EQ(std::distance(fs::directory_iterator(dir.path), fs::directory_iterator{}), 7);
+}
