@@ -49,10 +49,14 @@ static gauss_rule make_gauss_rule(int n) {
   return rule;
 }
 
-// Composite Gauss-Legendre (8 nodes) over the panels between sorted breaks.
-static double integrate_panels(
-    std::vector<double> breaks, const std::function<double(double)>& f) {
-  static const auto rule = make_gauss_rule(8);
+// Composite Gauss-Legendre (n nodes) over the panels between sorted breaks.
+static double integrate_panels(std::vector<double> breaks,
+    const std::function<double(double)>& f, int n = 8) {
+  static const auto rules = std::vector<gauss_rule>{make_gauss_rule(1),
+      make_gauss_rule(2), make_gauss_rule(3), make_gauss_rule(4),
+      make_gauss_rule(5), make_gauss_rule(6), make_gauss_rule(7),
+      make_gauss_rule(8)};
+  auto& rule = rules.at(n - 1);
   std::sort(breaks.begin(), breaks.end());
   auto sum = 0.0;
   for (auto i = 0; i + 1 < (int)breaks.size(); i++) {
@@ -88,9 +92,9 @@ static void add_lobe_breaks(std::vector<double>& breaks, double center,
 // Reference I_0(x) e^-x from the integral (1/pi) int_0^pi e^{x (cos t - 1)} dt
 // by the trapezoidal rule in long double: for a periodic analytic integrand
 // the error falls like I_{2n}(x) / I_0(x) ~ exp(-(2n)^2 / 2x), far below
-// 1e-18 with n = 6000 for every x up to 1e5.
+// 1e-18 with n = 3000 for every x up to 1e5 (exp(-180) there).
 static long double reference_i0e(long double x) {
-  const int n   = 6000;
+  const int n   = 3000;
   auto      sum = (1.0L + std::exp(-2 * x)) / 2;
   for (auto k = 1; k < n; k++) {
     sum += std::exp(x * (std::cos(k * 3.14159265358979323846264L / n) - 1));
@@ -442,7 +446,7 @@ TEST(hair, white_furnace_uniform_sampling) {
 
 TEST(hair, white_furnace_quadrature) {
   // Deterministic: integral of eval over theta_i and phi with composite
-  // Gauss-Legendre panels refined around every lobe (8 nodes per panel),
+  // Gauss-Legendre panels refined around every lobe (5 nodes per panel),
   // for beta_m, beta_n in {0.02, 0.05, 0.1, 0.2, 0.4, 0.6, 0.8, 1}, theta_o in
   // {-1.2, 0.1, 0.9} and h cycling through {-0.95, -0.3, 0.5, 0.99}.
   // Tolerance 0.002.
@@ -484,8 +488,8 @@ TEST(hair, white_furnace_quadrature) {
           return std::cos(theta_i) * integrate_panels(breaks_phi, [&](double phi) {
             auto wi = local_direction(theta_i, pif / 2 + phi);
             return (double)eval_hair_scattering(brdf, wo, wi).y;
-          });
-        });
+          }, 5);
+        }, 5);
         worst = std::max(worst, std::abs(integral - 1));
         EXPECT_NEAR(integral, 1, 0.002) << "beta_m " << beta_m << " beta_n "
                                         << beta_n << " theta_o " << theta_o;
@@ -494,4 +498,111 @@ TEST(hair, white_furnace_quadrature) {
   }
   std::printf("[ figure ] quadrature white furnace worst |E - 1| = %.2g\n", worst);
   RecordProperty("quadrature_furnace_worst", std::to_string(worst));
+}
+
+// Outgoing directions for the sampling tests: uniform, plus grazing ones
+// (|w.x| within 1e-2 .. 1e-6 of 1) a quarter of the time.
+static vec3f test_outgoing(rng_state& rng) {
+  if (rand1f(rng) < 0.75f) return sample_sphere(rand2f(rng));
+  auto sign = rand1f(rng) < 0.5f ? -1.0f : 1.0f;
+  auto tiny = std::pow(10.0f, -1 - 2 * rand1f(rng));  // 1e-1 .. 1e-3
+  auto phi  = 2 * pif * rand1f(rng);
+  return normalize(vec3f{sign, tiny * std::cos(phi), tiny * std::sin(phi)});
+}
+
+TEST(hair, sampling_weights_and_sampled_furnace) {
+  // sigma_a = 0: eval / pdf must be 1 for every sample (eval and pdf share
+  // the A_p-proportional lobe choice), within 0.001. 49 (beta_m, beta_n)
+  // pairs in {0.01, 0.1, 0.3, 0.5, 0.7, 0.9, 1}, 6000 samples each (294k in
+  // all), h from {-1, -0.999, 0, 0.999, 1} or uniform, a quarter of the
+  // outgoing directions grazing, random frames; fixed seed. The mean weight
+  // per pair is the sampled furnace: 1 +- 0.01.
+  auto betas        = std::vector<float>{0.01f, 0.1f, 0.3f, 0.5f, 0.7f, 0.9f, 1};
+  auto hs           = std::vector<float>{-1, -0.999f, 0, 0.999f, 1, 2};
+  auto rng          = make_rng(99);
+  auto worst_weight = 0.0, worst_furnace = 0.0;
+  auto bad          = 0;
+  for (auto beta_m : betas) {
+    for (auto beta_n : betas) {
+      auto pre = make_hair_precomputed(white_material(beta_m, beta_n, 10 * rand1f(rng)));
+      auto sum = 0.0;
+      const auto samples = 6000;
+      for (auto i = 0; i < samples; i++) {
+        auto h = hs[rand1i(rng, (int)hs.size())];
+        if (h == 2) h = -1 + 2 * rand1f(rng);
+        auto frame  = frame_fromz({0, 0, 0}, sample_sphere(rand2f(rng)));
+        auto brdf   = eval_hair_brdf(pre, h, frame);
+        auto wo     = transform_direction(frame, test_outgoing(rng));
+        auto wi     = sample_hair_scattering(brdf, wo, rand2f(rng));
+        auto f      = eval_hair_scattering(brdf, wo, wi);
+        auto pdf    = sample_hair_scattering_pdf(brdf, wo, wi);
+        auto weight = pdf > 0 ? f.y / pdf : 0.0f;
+        sum += weight;
+        auto deviation = std::abs(weight - 1.0);
+        worst_weight   = std::max(worst_weight, deviation);
+        if (deviation > 1e-3 && bad++ < 5) {
+          ADD_FAILURE() << "weight " << weight << " f " << f.y << " pdf " << pdf
+                        << " beta " << beta_m << " " << beta_n << " h " << h
+                        << " wo.x " << dot(wo, frame.x);
+        }
+      }
+      auto average  = sum / samples;
+      worst_furnace = std::max(worst_furnace, std::abs(average - 1));
+      EXPECT_NEAR(average, 1, 0.01) << "beta_m " << beta_m << " beta_n " << beta_n;
+    }
+  }
+  std::printf("[ figure ] sampling weights worst |w - 1| = %.2g; sampled furnace "
+              "worst |E - 1| = %.2g\n", worst_weight, worst_furnace);
+  RecordProperty("weights_worst", std::to_string(worst_weight));
+  RecordProperty("sampled_furnace_worst", std::to_string(worst_furnace));
+  EXPECT_EQ(bad, 0);
+}
+
+TEST(hair, sampling_consistency) {
+  // sigma_a = 0.25, incoming radiance L = z^2 (z the shading normal): the
+  // importance-sampled and the uniform estimate of int f L must agree within
+  // 1%. beta_m, beta_n in {0.2, 0.4, 0.6, 0.8, 1}; per pair 2 random
+  // (outgoing, h) configurations, each integrated by importance sampling
+  // (numbers jittered on a 160 x 160 grid, stratification kept by the Morton
+  // demux) and by uniform sampling (jittered 320 x 320 grid): 51200 and
+  // 204800 samples per pair. Fixed seed. Measured spread over 5 seeds: worst
+  // pair 0.3% - 0.5%; both estimators agree to 1e-5 at 10^6 samples.
+  auto rng   = make_rng(5);
+  auto worst = 0.0;
+  for (auto beta_m : {.2f, .4f, .6f, .8f, 1.f}) {
+    for (auto beta_n : {.2f, .4f, .6f, .8f, 1.f}) {
+      auto material    = white_material(beta_m, beta_n);
+      material.sigma_a = {0.25f, 0.25f, 0.25f};
+      auto pre         = make_hair_precomputed(material);
+      auto importance = 0.0, uniform = 0.0;
+      for (auto config = 0; config < 2; config++) {
+        auto brdf = eval_hair_brdf(pre, -1 + 2 * rand1f(rng), frame3f{});
+        auto wo   = sample_sphere(rand2f(rng));
+        auto sum  = 0.0;
+        const auto grid_is = 160;
+        for (auto i = 0; i < grid_is * grid_is; i++) {
+          auto cell = vec2f{(float)(i % grid_is), (float)(i / grid_is)};
+          auto wi   = sample_hair_scattering(
+              brdf, wo, (cell + rand2f(rng)) / (float)grid_is);
+          auto pdf = sample_hair_scattering_pdf(brdf, wo, wi);
+          if (pdf > 0) sum += eval_hair_scattering(brdf, wo, wi).y * sqr(wi.z) / pdf;
+        }
+        importance += sum / sqr(grid_is);
+        sum = 0;
+        const auto grid_u = 320;
+        for (auto i = 0; i < grid_u * grid_u; i++) {
+          auto cell = vec2f{(float)(i % grid_u), (float)(i / grid_u)};
+          auto wi   = sample_sphere((cell + rand2f(rng)) / (float)grid_u);
+          sum += eval_hair_scattering(brdf, wo, wi).y * sqr(wi.z) /
+                 sample_sphere_pdf(wi);
+        }
+        uniform += sum / sqr(grid_u);
+      }
+      auto difference = std::abs(importance - uniform) / importance;
+      worst           = std::max(worst, difference);
+      EXPECT_LT(difference, 0.01) << "beta_m " << beta_m << " beta_n " << beta_n;
+    }
+  }
+  std::printf("[ figure ] sampling consistency worst relative difference %.2g\n", worst);
+  RecordProperty("consistency_worst", std::to_string(worst));
 }
