@@ -10,6 +10,7 @@
 #include <csignal>
 #include <cstdio>
 #include <yocto/yocto_bvh.h>
+#include <yocto/yocto_hairgen.h>
 #include <yocto/yocto_pbrtio.h>
 #include <yocto/yocto_sceneio.h>
 #include <yocto/yocto_trace.h>
@@ -60,7 +61,7 @@ static bool load_any_scene(const std::string& filename, scene_data& scene,
   if (extension == ".pbrt" || extension == ".gz") {
     return load_pbrt_scene(filename, scene, error, params);
   } else if (extension == ".hair") {
-    return load_hair_scene(filename, scene, error);
+    return load_hair_scene(filename, scene, error, params);
   } else {
     return load_scene(filename, scene, error);
   }
@@ -227,6 +228,58 @@ static int run_convert(const std::string& input, const std::string& output,
 }
 
 // -----------------------------------------------------------------------------
+// HAIR GENERATOR
+// -----------------------------------------------------------------------------
+
+struct hair_options {
+  std::string        output      = "";
+  std::string        style       = "straight";
+  std::vector<float> sigma_a     = {};
+  std::vector<float> color       = {};
+  bool               has_melanin = false;
+};
+
+static int run_hair(const hair_options& options, hair_style_params params,
+    hair_material material) {
+  auto found = std::find(hair_style_names.begin(), hair_style_names.end(), options.style);
+  params.style = (hair_style)(found - hair_style_names.begin());
+  if (options.sigma_a.size() == 3) {
+    material.has_sigma_a = true;
+    material.sigma_a     = {options.sigma_a[0], options.sigma_a[1], options.sigma_a[2]};
+  }
+  if (options.color.size() == 3) {
+    material.has_color = true;
+    material.color     = {options.color[0], options.color[1], options.color[2]};
+  }
+  auto start     = std::chrono::steady_clock::now();
+  auto error     = std::string{};
+  auto extension = path_extension(options.output);
+  auto output    = options.output;
+  auto is_pbrt   = extension == ".pbrt" ||
+                 (output.size() > 8 && output.substr(output.size() - 8) == ".pbrt.gz");
+  auto strands   = (size_t)0, segments = (size_t)0;
+  if (extension == ".json") {
+    auto scene = make_hair_scene(params, material);
+    strands    = (size_t)params.strands;
+    segments   = scene.shapes[0].curves.size();
+    if (!save_scene(output, scene, error)) return print_error(error);
+  } else if (is_pbrt || extension == ".hair") {
+    // Strands only: stand-in geometry for scenes that include or load it.
+    auto shape = make_hair_strands(params);
+    strands    = (size_t)params.strands;
+    segments   = shape.curves.size();
+    auto ok    = is_pbrt ? save_pbrt_curves(output, shape, error)
+                         : save_hair_model(output, shape, error);
+    if (!ok) return print_error(error);
+  } else {
+    return print_error(output + ": unknown output extension (use .json, .pbrt, .pbrt.gz or .hair)");
+  }
+  std::printf("generated %s: %s hair, %zu strands, %zu Bezier segments in %.2fs\n",
+      output.c_str(), options.style.c_str(), strands, segments, seconds_since(start));
+  return 0;
+}
+
+// -----------------------------------------------------------------------------
 // MAIN
 // -----------------------------------------------------------------------------
 
@@ -271,6 +324,39 @@ int main(int argc, const char** argv) {
       ->check(CLI::Range(1, 64));
   convert->add_flag("--lenient", pbrt.lenient, "unknown pbrt directives are warnings");
 
+  auto hair_opts     = hair_options{};
+  auto hair_params   = hair_style_params{};
+  auto hair_material_params = hair_material{};
+  auto hair = app.add_subcommand("hair", "generate a hair scene or stand-in hair geometry");
+  hair->add_option("--style", hair_opts.style, "straight, curly, curls or block")
+      ->check(CLI::IsMember({"straight", "curly", "curls", "block"}));
+  hair->add_option("--strands,-n", hair_params.strands, "number of strands")
+      ->check(CLI::Range(1, 50000000));
+  hair->add_option("--segments", hair_params.segments, "Bezier segments per strand (0: style default)")
+      ->check(CLI::Range(0, 1000));
+  hair->add_option("--radius", hair_params.radius, "root radius (0: style default)")
+      ->check(CLI::NonNegativeNumber);
+  hair->add_option("--seed", hair_params.seed, "random seed");
+  hair->add_option("--output,-o", hair_opts.output,
+          "json scene (with ply and sky), .pbrt, .pbrt.gz or .hair strands")
+      ->required();
+  hair->add_option("--eumelanin", hair_material_params.eumelanin, "eumelanin concentration")
+      ->check(CLI::NonNegativeNumber);
+  hair->add_option("--pheomelanin", hair_material_params.pheomelanin, "pheomelanin concentration")
+      ->check(CLI::NonNegativeNumber);
+  hair->add_option("--sigma-a", hair_opts.sigma_a, "absorption r g b (overrides colours)")
+      ->expected(3);
+  hair->add_option("--color", hair_opts.color, "hair colour r g b (overrides melanin)")
+      ->expected(3);
+  hair->add_option("--beta-m", hair_material_params.beta_m, "longitudinal roughness")
+      ->check(CLI::Range(0.0f, 1.0f));
+  hair->add_option("--beta-n", hair_material_params.beta_n, "azimuthal roughness")
+      ->check(CLI::Range(0.0f, 1.0f));
+  hair->add_option("--alpha", hair_material_params.alpha, "scale tilt in degrees")
+      ->check(CLI::Range(-90.0f, 90.0f));
+  hair->add_option("--eta", hair_material_params.eta, "index of refraction")
+      ->check(CLI::Range(1.0f, 10.0f));
+
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -284,6 +370,8 @@ int main(int argc, const char** argv) {
     return run_render(render_opts, params, *render);
   } else if (info->parsed()) {
     return run_info(info_scene);
+  } else if (hair->parsed()) {
+    return run_hair(hair_opts, hair_params, hair_material_params);
   } else if (convert->parsed()) {
     pbrt.curves_as_lines = curves_mode == "lines";
     return run_convert(convert_in, convert_out, pbrt);

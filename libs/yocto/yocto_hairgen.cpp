@@ -53,8 +53,8 @@ static vec3f push_out_of_head(const vec3f& p, float offset) {
   return hair_head_center + d / l * (hair_head_radius * offset);
 }
 
-// A root on the scalp: the head's upper part, denser on top, none on the face
-// side (+z below the hairline).
+// A root on the scalp: the head's upper part, none on the face side (+z below
+// the hairline, as in Cem Yuksel's models, which scenes view from -z).
 static vec3f sample_scalp(rng_state& rng) {
   while (true) {
     auto n = sample_sphere(rand2f(rng));
@@ -64,20 +64,23 @@ static vec3f sample_scalp(rng_state& rng) {
   }
 }
 
-// A strand that grows from the scalp, bends down under its weight and slides
-// over the head; curly strands add a helix around that path.
+// A strand that grows from the scalp, lies down along the head under its
+// weight and falls from it; curly strands add a helix around that path.
 static std::vector<vec3f> make_head_strand(rng_state& rng, int npoints, bool curly) {
-  auto normal = sample_scalp(rng);
-  auto length = (curly ? 9.0f : 11.0f) * (0.85f + 0.3f * rand1f(rng));
-  auto step   = length / (npoints - 1);
-  auto p      = hair_head_center + normal * (hair_head_radius * 1.01f);
-  auto d      = normalize(normal + vec3f{0, 0.2f, 0});
+  auto normal  = sample_scalp(rng);
+  auto strand_length = (curly ? 9.0f : 11.0f) * (0.85f + 0.3f * rand1f(rng));
+  auto step    = strand_length / (npoints - 1);
   auto gravity = vec3f{0, -1, 0};
-  auto path    = std::vector<vec3f>{p};
+  // Start along the scalp, downhill; on the crown, away from the parting.
+  auto downhill = gravity - dot(gravity, normal) * normal;
+  if (length(downhill) < 0.2f) downhill = vec3f{normal.x >= 0 ? 1.0f : -1.0f, 0, -0.4f};
+  auto d    = normalize(safe_normalize(downhill) + normal * 0.3f);
+  auto p    = hair_head_center + normal * (hair_head_radius * 1.01f);
+  auto path = std::vector<vec3f>{p};
   for (auto k = 1; k < npoints; k++) {
-    auto jitter = (rand3f(rng) - 0.5f) * 0.15f;
-    d           = normalize(d * 0.65f + gravity * 0.35f + jitter);
-    p           = push_out_of_head(p + d * step, 1.02f + 0.08f * (float)k / npoints);
+    auto jitter = (rand3f(rng) - 0.5f) * 0.1f;
+    d           = normalize(d * 0.7f + gravity * 0.3f + jitter);
+    p           = push_out_of_head(p + d * step, 1.02f + 0.06f * (float)k / npoints);
     path.push_back(p);
   }
   if (!curly) return path;
@@ -197,6 +200,7 @@ scene_data make_hair_scene(const hair_style_params& params, const hair_material&
   switch (params.style) {
     case hair_style::straight:
     case hair_style::curly:
+      // The thesis's camera; the hair is turned to show its back (below).
       camera.frame  = lookat_frame({0, 15, 23}, {0, 9.5f, 0}, {0, 1, 0});
       camera.aspect = 1;
       camera.focus  = 24;
@@ -257,7 +261,10 @@ scene_data make_hair_scene(const hair_style_params& params, const hair_material&
     }
     return scene;
   }
-  add_instance("hair", identity3x4f, 0, add_material("hair", hair_material_data));
+  // Head styles face +z; the camera looks from +z at the back of the head.
+  auto turn = params.style == hair_style::block ? identity3x4f
+                                                : rotation_frame({0, 1, 0}, pif);
+  add_instance("hair", turn, 0, add_material("hair", hair_material_data));
   auto solid = material_data{};
   if (params.style == hair_style::block) {
     solid.color = {0.2f, 0.8f, 0.3f};
@@ -268,7 +275,8 @@ scene_data make_hair_scene(const hair_style_params& params, const hair_material&
     solid.color = {0.35f, 0.25f, 0.2f};
     scene.shapes.push_back(make_sphere_shape(128, hair_head_radius));
     scene.shape_names.push_back("head");
-    add_instance("head", translation_frame(hair_head_center), 1, add_material("head", solid));
+    add_instance("head", turn * translation_frame(hair_head_center), 1,
+        add_material("head", solid));
   }
   return scene;
 }
