@@ -74,17 +74,21 @@ static bool load_binary(const std::string& filename, std::string& data, std::str
     error = filename + ": cannot open file (" + std::strerror(errno) + ")";
     return false;
   }
+  // Read straight into the string when the size is known; then read on in
+  // chunks, for files whose size the system does not tell.
   data.clear();
   if (std::fseek(file, 0, SEEK_END) == 0) {
     auto size = std::ftell(file);
-    if (size > 0) data.reserve((size_t)size);
     std::fseek(file, 0, SEEK_SET);
+    if (size > 0) {
+      data.resize((size_t)size);
+      data.resize(std::fread(data.data(), 1, (size_t)size, file));
+    }
   }
   char buffer[1 << 16];
-  while (true) {
+  while (!std::feof(file) && !std::ferror(file)) {
     auto count = std::fread(buffer, 1, sizeof(buffer), file);
     data.append(buffer, count);
-    if (count < sizeof(buffer)) break;
   }
   auto failed = std::ferror(file) != 0;
   std::fclose(file);
@@ -348,7 +352,7 @@ static bool parse_ply_header(const std::string& filename, ply_cursor& cursor,
 }
 
 // Vertex properties we keep, each read into its own column.
-enum struct ply_column { x, y, z, nx, ny, nz, u, v, radius, count };
+enum struct ply_column { x, y, z, nx, ny, nz, u, v, radius };
 
 static int ply_vertex_column(const std::string& name) {
   static const auto names = std::unordered_map<std::string, ply_column>{
@@ -393,10 +397,23 @@ static bool read_ply_rows(const std::string& filename, ply_cursor& cursor,
     auto swap   = swap_bytes(cursor.format);
     auto offset = (size_t)0;
     for (auto p = 0; p < (int)element.properties.size(); p++) {
-      auto  type = element.properties[p].type;
-      auto* base = cursor.data + cursor.pos + offset;
-      for (size_t row = 0; row < element.count; row++)
-        on_scalar(p, row, load_binary_value(base + row * stride, type, swap));
+      auto  type   = element.properties[p].type;
+      auto* base   = cursor.data + cursor.pos + offset;
+      auto  column = [&](auto typed) {
+        using T = decltype(typed);
+        for (size_t row = 0; row < element.count; row++)
+          on_scalar(p, row, (double)load_raw<T>(base + row * stride, swap));
+      };
+      switch (type) {  // outside the loop over rows
+        case ply_type::i8: column(int8_t{}); break;
+        case ply_type::u8: column(uint8_t{}); break;
+        case ply_type::i16: column(int16_t{}); break;
+        case ply_type::u16: column(uint16_t{}); break;
+        case ply_type::i32: column(int32_t{}); break;
+        case ply_type::u32: column(uint32_t{}); break;
+        case ply_type::f32: column(float{}); break;
+        case ply_type::f64: column(double{}); break;
+      }
       offset += ply_type_size(type);
     }
     cursor.pos += element.count * stride;
@@ -426,9 +443,18 @@ static bool read_ply_rows(const std::string& filename, ply_cursor& cursor,
       if (value * min_bytes > (double)(cursor.size - cursor.pos))
         return ply_data_error(filename, cursor, element, row, error);
       values.resize((size_t)value);
-      for (auto& item : values) {
-        if (!read_ply_value(cursor, property.type, item))
-          return ply_data_error(filename, cursor, element, row, error);
+      if (cursor.format != ply_format::ascii) {
+        // The length check above covers the whole binary list.
+        auto size = ply_type_size(property.type);
+        auto swap = swap_bytes(cursor.format);
+        for (size_t k = 0; k < values.size(); k++)
+          values[k] = load_binary_value(cursor.data + cursor.pos + k * size, property.type, swap);
+        cursor.pos += values.size() * size;
+      } else {
+        for (auto& item : values) {
+          if (!read_ply_value(cursor, property.type, item))
+            return ply_data_error(filename, cursor, element, row, error);
+        }
       }
       if (!on_list(p, row, values)) return false;
     }
@@ -457,29 +483,50 @@ static bool load_ply_shape(
     return false;
   }
 
-  auto columns = std::array<std::vector<float>, (size_t)ply_column::count>{};
-  auto kinds   = 0;
+  auto kinds = 0;
   for (auto& element : elements) {
     auto remaining = data.size() - cursor.pos;
     auto max_rows  = std::min(element.count,
          remaining / ply_min_row_bytes(element, cursor.format) + 1);
     if (element.name == "vertex") {
-      auto targets = std::vector<int>{};
+      auto columns = std::vector<int>{};
       for (auto& property : element.properties)
-        targets.push_back(property.is_list ? -1 : ply_vertex_column(property.name));
+        columns.push_back(property.is_list ? -1 : ply_vertex_column(property.name));
+      auto has = [&](ply_column c) {
+        return std::find(columns.begin(), columns.end(), (int)c) != columns.end();
+      };
       for (auto c : {ply_column::x, ply_column::y, ply_column::z}) {
-        if (std::find(targets.begin(), targets.end(), (int)c) == targets.end()) {
+        if (!has(c)) {
           error = filename + ": element vertex has no property " +
                   std::string(1, "xyz"[(int)c]);
           return false;
         }
       }
-      for (auto target : targets)
-        if (target >= 0) columns[target].resize(max_rows);
+      // Each property is written straight to its place in the shape: no
+      // intermediate columns for millions of vertices.
+      static_assert(sizeof(vec3f) == 3 * sizeof(float) && sizeof(vec2f) == 2 * sizeof(float));
+      shape.positions.resize(max_rows);
+      if (has(ply_column::nx) && has(ply_column::ny) && has(ply_column::nz))
+        shape.normals.resize(max_rows);
+      if (has(ply_column::u) && has(ply_column::v)) shape.texcoords.resize(max_rows);
+      if (has(ply_column::radius)) shape.radius.resize(max_rows);
+      auto targets = std::vector<float*>(columns.size(), nullptr);
+      auto strides = std::vector<size_t>(columns.size(), 0);
+      for (size_t p = 0; p < columns.size(); p++) {
+        auto c = columns[p];
+        if (c < 0) continue;
+        if (c <= (int)ply_column::z) {
+          targets[p] = (float*)shape.positions.data() + c, strides[p] = 3;
+        } else if (c <= (int)ply_column::nz && !shape.normals.empty()) {
+          targets[p] = (float*)shape.normals.data() + (c - (int)ply_column::nx), strides[p] = 3;
+        } else if (c <= (int)ply_column::v && !shape.texcoords.empty()) {
+          targets[p] = (float*)shape.texcoords.data() + (c - (int)ply_column::u), strides[p] = 2;
+        } else if (c == (int)ply_column::radius) {
+          targets[p] = shape.radius.data(), strides[p] = 1;
+        }
+      }
       auto on_scalar = [&](int p, size_t row, double value) {
-        if (targets[p] < 0) return;
-        if (row >= columns[targets[p]].size()) columns[targets[p]].resize(row + 1);
-        columns[targets[p]][row] = (float)value;
+        if (targets[p] && row < max_rows) targets[p][row * strides[p]] = (float)value;
       };
       auto on_list = [](int, size_t, const std::vector<double>&) { return true; };
       if (!read_ply_rows(filename, cursor, element, on_scalar, on_list, error)) return false;
@@ -544,38 +591,21 @@ static bool load_ply_shape(
     return false;
   }
 
-  auto column = [&](ply_column c) -> std::vector<float>& { return columns[(int)c]; };
-  shape.positions.resize(num_vertices);
-  for (size_t i = 0; i < num_vertices; i++)
-    shape.positions[i] = {column(ply_column::x)[i], column(ply_column::y)[i],
-        column(ply_column::z)[i]};
-  if (!column(ply_column::nx).empty() && !column(ply_column::ny).empty() &&
-      !column(ply_column::nz).empty()) {
-    shape.normals.resize(num_vertices);
-    for (size_t i = 0; i < num_vertices; i++)
-      shape.normals[i] = {column(ply_column::nx)[i], column(ply_column::ny)[i],
-          column(ply_column::nz)[i]};
-  }
-  if (!column(ply_column::u).empty() && !column(ply_column::v).empty()) {
-    shape.texcoords.resize(num_vertices);
-    for (size_t i = 0; i < num_vertices; i++)
-      shape.texcoords[i] = {column(ply_column::u)[i], column(ply_column::v)[i]};
-  }
-  if (!column(ply_column::radius).empty()) {
-    shape.radius = std::move(column(ply_column::radius));
-    shape.radius.resize(num_vertices);
-  }
-
   // No NaN or Inf may reach the renderer.
-  for (auto c = 0; c < (int)ply_column::count; c++) {
-    for (size_t i = 0; i < columns[c].size() && i < num_vertices; i++) {
-      if (!std::isfinite(columns[c][i])) {
-        error = filename + ": element vertex index " + std::to_string(i) +
+  auto check_finite = [&](const float* values, size_t count, size_t stride) {
+    for (size_t i = 0; i < count * stride; i++) {
+      if (!std::isfinite(values[i])) {
+        error = filename + ": element vertex index " + std::to_string(i / stride) +
                 ": value is not finite";
         return false;
       }
     }
-  }
+    return true;
+  };
+  if (!check_finite((const float*)shape.positions.data(), shape.positions.size(), 3) ||
+      !check_finite((const float*)shape.normals.data(), shape.normals.size(), 3) ||
+      !check_finite((const float*)shape.texcoords.data(), shape.texcoords.size(), 2))
+    return false;
   for (size_t i = 0; i < shape.radius.size(); i++) {
     if (!std::isfinite(shape.radius[i]) || shape.radius[i] < 0) {
       error = filename + ": element vertex index " + std::to_string(i) +
