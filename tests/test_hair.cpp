@@ -606,3 +606,202 @@ TEST(hair, sampling_consistency) {
   std::printf("[ figure ] sampling consistency worst relative difference %.2g\n", worst);
   RecordProperty("consistency_worst", std::to_string(worst));
 }
+
+// -----------------------------------------------------------------------------
+// CHI-SQUARE GOODNESS OF FIT OF THE SAMPLER AGAINST THE PDF
+// -----------------------------------------------------------------------------
+
+// Regularised upper incomplete gamma function Q(a, x) = Gamma(a, x) / Gamma(a):
+// the series of P = 1 - Q for x < a + 1, else the continued fraction of Q
+// (Legendre's), evaluated by the modified Lentz method.
+static double gamma_q(double a, double x) {
+  if (!(x > 0)) return 1;
+  auto log_prefix = a * std::log(x) - x - std::lgamma(a);
+  if (x < a + 1) {
+    // P(a, x) = x^a e^-x / Gamma(a) sum_n x^n / (a (a + 1) ... (a + n)).
+    auto term = 1 / a, sum = term;
+    for (auto n = 1; n < 10000 && term > sum * 1e-16; n++) {
+      term *= x / (a + n);
+      sum += term;
+    }
+    return 1 - sum * std::exp(log_prefix);
+  }
+  // Gamma(a, x) = x^a e^-x / (x + 1 - a - 1 (1 - a) / (x + 3 - a - ...)).
+  const auto tiny = 1e-300;
+  auto       b = x + 1 - a, c = 1 / tiny, d = 1 / b, fraction = d;
+  for (auto i = 1; i < 10000; i++) {
+    auto an = -i * (i - a);
+    b += 2;
+    d = an * d + b;
+    if (std::abs(d) < tiny) d = tiny;
+    c = b + an / c;
+    if (std::abs(c) < tiny) c = tiny;
+    d = 1 / d;
+    auto delta = d * c;
+    fraction *= delta;
+    if (std::abs(delta - 1) < 1e-16) break;
+  }
+  return std::exp(log_prefix) * fraction;
+}
+
+TEST(hair, gamma_q_closed_forms) {
+  // Q(1, x) = e^-x; Q(3, x) = e^-x (1 + x + x^2 / 2); Q(1/2, x) = erfc(sqrt x).
+  for (auto x : {0.1, 1.0, 2.5, 4.0, 10.0, 40.0}) {
+    EXPECT_NEAR(gamma_q(1, x), std::exp(-x), 1e-12 * std::max(1.0, std::exp(-x)));
+    EXPECT_NEAR(gamma_q(3, x) / (std::exp(-x) * (1 + x + x * x / 2)), 1, 1e-10);
+    EXPECT_NEAR(gamma_q(0.5, x) / std::erfc(std::sqrt(x)), 1, 1e-10);
+  }
+}
+
+struct chi2_case {
+  float beta_m, beta_n, alpha;
+  vec3f sigma_a;
+  float h, theta_o;
+};
+
+// p-value of the chi-square test of `samples` draws of sample_hair_scattering
+// (the two- or the four-number overload) against sample_hair_scattering_pdf on a 10 x 20 grid in (sin theta_i, phi_i)
+// of the fiber frame. Expected counts integrate the pdf over each cell (6 x 8
+// sub-panels of 4 x 4 Gauss-Legendre nodes; d omega = d sin(theta) d phi);
+// cells expecting fewer than 5 are pooled, smallest first, until the pool
+// expects 5. Also returns the pdf's integral over the sphere.
+static double chi2_pvalue(const chi2_case& test, bool four_numbers,
+    int samples, uint64_t seed, double& pdf_integral, int& zero_pdf_hits) {
+  auto material        = white_material(test.beta_m, test.beta_n, test.alpha);
+  material.sigma_a     = test.sigma_a;
+  auto frame           = frame_fromz({0, 0, 0}, normalize(vec3f{0.3f, -0.5f, 0.8f}));
+  auto brdf            = eval_hair_brdf(material, test.h, frame);
+  auto phi_o           = 0.7f;
+  auto wo              = brdf.x * std::sin(test.theta_o) +
+              brdf.y * (std::cos(test.theta_o) * std::cos(phi_o)) +
+              brdf.z * (std::cos(test.theta_o) * std::sin(phi_o));
+  const int  rows = 10, cols = 20;
+  auto       direction = [&](double u, double phi) {
+    auto r = std::sqrt(std::max(0.0, 1 - u * u));
+    return normalize(brdf.x * (float)u + brdf.y * (float)(r * std::cos(phi)) +
+                     brdf.z * (float)(r * std::sin(phi)));
+  };
+  static const auto rule     = make_gauss_rule(4);
+  auto              expected = std::vector<double>(rows * cols, 0.0);
+  for (auto row = 0; row < rows; row++) {
+    for (auto col = 0; col < cols; col++) {
+      auto u0 = -1 + 2.0 * row / rows, du = 2.0 / rows / 6;
+      auto p0 = -pif + 2.0 * pif * col / cols, dp = 2.0 * pif / cols / 8;
+      auto sum = 0.0;
+      for (auto su = 0; su < 6; su++) {
+        for (auto sp = 0; sp < 8; sp++) {
+          for (auto i = 0; i < 4; i++) {
+            for (auto j = 0; j < 4; j++) {
+              auto u   = u0 + du * (su + (rule.nodes[i] + 1) / 2);
+              auto phi = p0 + dp * (sp + (rule.nodes[j] + 1) / 2);
+              auto w   = rule.weights[i] * rule.weights[j] * du * dp / 4;
+              sum += w * sample_hair_scattering_pdf(brdf, wo, direction(u, phi));
+            }
+          }
+        }
+      }
+      expected[row * cols + col] = sum * samples;
+    }
+  }
+  pdf_integral = 0;
+  for (auto e : expected) pdf_integral += e / samples;
+
+  auto observed = std::vector<double>(rows * cols, 0.0);
+  auto rng      = make_rng(seed);
+  for (auto i = 0; i < samples; i++) {
+    auto wi  = four_numbers
+                   ? sample_hair_scattering(brdf, wo, vec4f{rand2f(rng), rand2f(rng)})
+                   : sample_hair_scattering(brdf, wo, rand2f(rng));
+    auto u   = std::clamp(dot(wi, brdf.x), -1.0f, 1.0f);
+    auto phi = std::atan2(dot(wi, brdf.z), dot(wi, brdf.y));
+    auto row = std::clamp((int)((u + 1) / 2 * rows), 0, rows - 1);
+    auto col = std::clamp((int)((phi + pif) / (2 * pif) * cols), 0, cols - 1);
+    observed[row * cols + col] += 1;
+  }
+
+  // Samples in cells where the pdf integrates to (nearly) nothing.
+  zero_pdf_hits = 0;
+  for (auto cell = 0; cell < rows * cols; cell++) {
+    if (expected[cell] < 1e-9 && observed[cell] > 0) zero_pdf_hits++;
+  }
+
+  auto order = std::vector<int>(rows * cols);
+  for (auto cell = 0; cell < rows * cols; cell++) order[cell] = cell;
+  std::sort(order.begin(), order.end(),
+      [&](int a, int b) { return expected[a] < expected[b]; });
+  auto statistic = 0.0, pool_expected = 0.0, pool_observed = 0.0;
+  auto bins = 0;
+  for (auto cell : order) {
+    if (pool_expected < 5) {
+      pool_expected += expected[cell];
+      pool_observed += observed[cell];
+      if (pool_expected >= 5) {
+        statistic += sqr(pool_observed - pool_expected) / pool_expected;
+        bins++;
+      }
+    } else {
+      statistic += sqr(observed[cell] - expected[cell]) / expected[cell];
+      bins++;
+    }
+  }
+  return gamma_q((bins - 1) / 2.0, statistic / 2);
+}
+
+// Low, middle and high roughness; alpha 0 and 10 degrees; white and
+// absorbing; h and theta_o varied, with a grazing and an edge case.
+static std::vector<chi2_case> chi2_cases() {
+  auto cases     = std::vector<chi2_case>{};
+  auto roughness = std::vector<vec2f>{{0.15f, 0.2f}, {0.35f, 0.5f}, {0.8f, 0.9f}};
+  auto hs        = std::vector<float>{-0.7f, 0.2f, 0.95f, -0.3f, 0.6f, 0.0f};
+  auto thetas    = std::vector<float>{0.3f, -0.9f, 1.2f, -0.1f, 0.7f, -1.3f, 0.5f};
+  auto index     = 0;
+  for (auto beta : roughness) {
+    for (auto alpha : {0.0f, 10.0f}) {
+      for (auto sigma_a : {vec3f{0, 0, 0}, vec3f{0.4f, 1.0f, 2.5f}}) {
+        cases.push_back({beta.x, beta.y, alpha, sigma_a, hs[index % hs.size()],
+            thetas[index % thetas.size()]});
+        index++;
+      }
+    }
+  }
+  cases.push_back({0.15f, 0.2f, 2, {0.2f, 0.2f, 0.2f}, 1.0f, 1.45f});
+  cases.push_back({0.3f, 0.3f, 2, {0.5f, 0.8f, 1.2f}, -1.0f, -0.05f});
+  return cases;
+}
+
+// Runs the chi-square test over all the cases with one sampler overload.
+static void test_chi2_cases(bool four_numbers, uint64_t seed) {
+  auto worst_p = 1.0, worst_integral = 0.0;
+  for (auto& test : chi2_cases()) {
+    auto integral  = 0.0;
+    auto zero_hits = 0;
+    auto p = chi2_pvalue(test, four_numbers, 100000, seed++, integral, zero_hits);
+    std::printf("[ figure ] chi2 (%s) beta %.2f %.2f alpha %2.0f sigma_a %.1f "
+                "h %+.2f theta_o %+.2f: p = %.3f, pdf integral %.6f\n",
+        four_numbers ? "4 numbers" : "2 numbers", test.beta_m, test.beta_n,
+        test.alpha, test.sigma_a.x, test.h, test.theta_o, p, integral);
+    worst_p        = std::min(worst_p, p);
+    worst_integral = std::max(worst_integral, std::abs(integral - 1));
+    EXPECT_GT(p, 0.01) << "beta " << test.beta_m << " " << test.beta_n
+                       << " alpha " << test.alpha << " h " << test.h;
+    EXPECT_NEAR(integral, 1, 2e-3) << "beta " << test.beta_m << " " << test.beta_n;
+    EXPECT_EQ(zero_hits, 0);
+  }
+  std::printf("[ figure ] chi2 (%s) smallest p-value %.3f; worst |pdf integral "
+              "- 1| %.2g\n", four_numbers ? "4 numbers" : "2 numbers", worst_p,
+      worst_integral);
+  testing::Test::RecordProperty(
+      four_numbers ? "chi2_smallest_p_4" : "chi2_smallest_p_2", std::to_string(worst_p));
+  testing::Test::RecordProperty("pdf_integral_worst", std::to_string(worst_integral));
+}
+
+// 14 parameter sets (chi2_cases), 100000 samples each with fixed seeds:
+// p-value > 0.01 each, the pdf integrates to 1 within 2e-3 over the sphere,
+// and no sample lands where the pdf is 0. Under a correct sampler p is
+// uniform, so 14 sets at 0.01 fail by chance with probability 13% for a
+// random seed; the seeds are fixed, and the sampler was also checked at 10^6
+// and 4 10^6 samples over many seeds (docs/results_hair.md). Deliberate
+// mismatches in the sampler fail it: the logistic scale 5% too wide gives
+// p < 0.001 for all 14 sets; the variance 5% too wide, for 12 of 14.
+TEST(hair, chi_square_two_number_sampler) { test_chi2_cases(false, 1000); }
+TEST(hair, chi_square_four_number_sampler) { test_chi2_cases(true, 2000); }

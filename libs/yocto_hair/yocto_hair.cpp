@@ -63,6 +63,37 @@ static constexpr std::array<double, n> make_i0_asymptotic() {
 static constexpr auto i0_series     = make_i0_series<24>();
 static constexpr auto i0_asymptotic = make_i0_asymptotic<15>();
 
+// MurmurHash3's 32-bit finaliser (Appleby): mixes every input bit into every
+// output bit.
+static uint32_t hash_bits(uint32_t x) {
+  x ^= x >> 16;
+  x *= 0x85ebca6bu;
+  x ^= x >> 13;
+  x *= 0xc2b2ae35u;
+  x ^= x >> 16;
+  return x;
+}
+
+// demux_hair_sample for the sampler. A float in [0, 1) resolves 24 bits near
+// 1 and random number generators give 24 (multiples of 2^-24), so the 32-bit
+// code has 8 bits the input does not carry: 12 bits per output, a 2^-12
+// quantisation that a chi-square test detects in the tails of low-roughness
+// lobes. Keep the Morton demux of the top 24 bits (and so the
+// stratification), and fill the low 8 bits and a fraction below 2^-16 from a
+// hash of the whole input.
+static vec2f demux_hair_sample_filled(float u) {
+  auto scaled   = (double)std::clamp(u, 0.0f, 1.0f) * 4294967296.0;
+  auto bits     = (uint32_t)std::min(scaled, 4294967295.0);
+  auto hash     = hash_bits(bits ^ 0x9e3779b9u);
+  bits          = (bits & 0xffffff00u) | (hash & 0xffu);
+  auto fraction = hash_bits(hash);
+  auto x        = compact_1by1(bits) + (fraction & 0xffffu) / 65536.0f;
+  auto y        = compact_1by1(bits >> 1) + (fraction >> 16) / 65536.0f;
+  // x / 2^16 may round up to 1 in float.
+  return {std::min(x / 65536.0f, 1 - flt_eps / 2),
+      std::min(y / 65536.0f, 1 - flt_eps / 2)};
+}
+
 float hair_bessel_i0e(float x_) {
   // In double with positive terms only, so that the float result is within
   // rounding of the exact value.
@@ -420,11 +451,7 @@ float sample_hair_scattering_pdf(
 
 vec3f sample_hair_scattering(
     const hair_brdf& brdf, const vec3f& outgoing, const vec2f& rn) {
-  // Each demuxed value k / 2^16 stands for the cell [k, k + 1) / 2^16: take
-  // its centre, so that a zero never reaches the inverse CDFs, whose limits
-  // at 0 are the far ends of the lobes (t = 2, phi = -pi).
-  auto half = vec2f{0.5f / 65536, 0.5f / 65536};
-  auto u0 = demux_hair_sample(rn.x) + half, u1 = demux_hair_sample(rn.y) + half;
+  auto u0 = demux_hair_sample_filled(rn.x), u1 = demux_hair_sample_filled(rn.y);
   return sample_hair_scattering(brdf, outgoing, vec4f{u0.x, u0.y, u1.x, u1.y});
 }
 

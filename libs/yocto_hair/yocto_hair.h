@@ -92,9 +92,11 @@ vec3f eval_hair_scattering(
     const hair_brdf& brdf, const vec3f& outgoing, const vec3f& incoming);
 
 // Samples an incoming direction from two uniform numbers in [0, 1), each
-// split in two by demux_hair_sample (then moved to the centre of its 2^-16
-// cell). Returns {0, 0, 0} if the fiber neither
-// reflects nor transmits anything (then the pdf is 0 too).
+// split in two by demux_hair_sample; as a float carries 24 bits, 12 per
+// output, the bits below are filled from a hash of the input, so the four
+// numbers keep the Morton stratification without being quantised. Returns
+// {0, 0, 0} if the fiber neither reflects nor transmits anything (then the
+// pdf is 0 too).
 vec3f sample_hair_scattering(
     const hair_brdf& brdf, const vec3f& outgoing, const vec2f& rn);
 // The same from four independent uniform numbers: lobe choice, azimuth,
