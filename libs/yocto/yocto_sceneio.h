@@ -24,11 +24,39 @@ namespace yocto {
 
 // Loads a json scene with its shapes and textures. Warnings (unknown keys)
 // are appended to `warnings` if given, printed to stderr otherwise.
+//
+// Groups: `cameras`, `environments`, `textures`, `shapes`, `materials`,
+// `instances` (or `objects`, as 4.0 calls them), plus `asset` (copyright),
+// `distant_lights` and `settings` (resolution, samples, bounces). Each group
+// is an array (4.2: integer references, `uri` files relative to the json)
+// or an object keyed by name (4.0: references by name; a shape or texture
+// named but not listed is found at shapes/NAME.ply or
+// textures/NAME.{hdr,exr,png,jpg,jpeg,pfm}); layouts may mix per group.
+// Frames are 12 numbers (x, y, z axes, then origin) or a 9-number `lookat`
+// (from, to, up); a camera placed by lookat focuses on `to`.
+//
+// Material types: matte, glossy, hair; other Yocto types map to the nearest
+// with a warning (plastic, metal, reflective, gltfpbr -> glossy; transparent,
+// refractive, glass, subsurface, volumetric -> matte); anything else is an
+// error. A material without `type` is hair if it has a hair key (sigma_a,
+// eumelanin, pheomelanin, beta_m, beta_n, alpha, eta or an alias) or if the
+// instances that use it all have fiber (lines or curves) shapes; otherwise
+// matte. Hair keys: sigma_a, color (into hair.color), eumelanin, pheomelanin,
+// beta_m, beta_n (both in [0, 1]), alpha (degrees), eta (> 0); aliases
+// sigmaA, betaM, betaN. has_sigma_a/has_color are set when given; one
+// pigment given makes the other 0. Keys a type does not use are dropped with
+// a warning (e.g. roughness on hair), so a loaded material holds defaults in
+// the fields its type ignores. Bad values, wrong types, out-of-range
+// references, missing files and hair on a triangle mesh are errors.
 bool load_scene(const std::string& filename, scene_data& scene, std::string& error,
     std::vector<std::string>* warnings = nullptr);
 
 // Saves a json scene (4.2 layout) with shapes as PLY files under shapes/ and
-// textures under textures/, next to the json.
+// textures as float EXR under textures/, next to the json, named after the
+// elements (made safe and unique). Each material writes the keys its type
+// uses, so load_scene(save_scene(scene)) gives back every field that has a
+// meaning. The scene is validated first; on failure the files this call
+// created are removed.
 bool save_scene(const std::string& filename, const scene_data& scene,
     std::string& error, bool ascii_shapes = false);
 
@@ -39,8 +67,12 @@ bool save_scene(const std::string& filename, const scene_data& scene,
 // -----------------------------------------------------------------------------
 namespace yocto {
 
-// PLY: vertex x y z [nx ny nz] [u v] [radius]; element face (triangles),
-// line (2 indices each) or curve (4 indices each) with vertex_indices.
+// PLY: vertex x y z [nx ny nz] [u v | s t] [radius]; element face
+// (polygons become triangle fans), line (polylines become segments) or curve
+// (4 indices each), each with a vertex_indices list. Reads ascii and binary
+// of either byte order, any property type; skips unknown properties and
+// elements. Texcoords are kept as stored (no v flip). Writes binary
+// little-endian or ascii.
 bool load_shape(const std::string& filename, shape_data& shape, std::string& error);
 bool save_shape(const std::string& filename, const shape_data& shape,
     std::string& error, bool ascii = false);
@@ -56,8 +88,9 @@ namespace yocto {
 // converted from sRGB).
 bool load_image(const std::string& filename, texture_data& image, std::string& error);
 
-// Saves linear RGB pixels: exr/hdr/pfm stay linear, png/jpg are scaled by
-// 2^exposure, converted to sRGB and quantised. Unknown extension is an error.
+// Saves linear RGB pixels: exr/hdr/pfm stay linear (exr and pfm as 32-bit
+// float), png/jpg are scaled by 2^exposure, clamped, converted to sRGB and
+// quantised. Unknown extension and non-finite pixels are errors.
 bool save_image(const std::string& filename, const texture_data& image,
     std::string& error, float exposure = 0);
 
