@@ -4,5 +4,5 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh
 mkdir -p out
-build/apps/yscene render scenes/default/default.json --output out/default.png "$@"
+build/apps/yscene render scenes/hair-locks/hair-locks.json --output out/default.png "$@"
 echo "image: $(pwd)/out/default.png"

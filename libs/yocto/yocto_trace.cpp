@@ -406,9 +406,11 @@ vec3f trace_radiance(const scene_data& scene, const scene_bvh& bvh,
     bsdf_pdf = pdf;
     if (!isfinite(weight)) break;
 
-    // Russian roulette after a few bounces (unbiased).
-    if (bounce >= 3) {
-      auto survive = std::min(0.95f, max_component(weight));
+    // Russian roulette after a few bounces, only on paths that lost energy:
+    // a path that carries all of it (a white fiber) would gain variance and
+    // nothing else (as pbrt does). Unbiased either way.
+    auto survive = max_component(weight);
+    if (bounce >= 3 && survive < 1) {
       if (rand1f(rng) >= survive) break;
       weight /= survive;
     }
