@@ -13,6 +13,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <random>
 
 using namespace yocto;
 namespace fs = std::filesystem;
@@ -139,6 +140,37 @@ TEST(pbrtio, lexical_details) {
   EXPECT_FLOAT_EQ(hair.beta_n, 0.1f);
   EXPECT_FLOAT_EQ(hair.alpha, 0.0f);
   expect_near(scene.materials[0].emission, {1, 2, 3});
+}
+
+TEST(pbrtio, numbers_parse_exactly) {
+  // 30000 numbers (fixed seed) in the formats real files use: %g with 6 and
+  // 9 digits, fixed point, exponents, leading dot, huge and tiny. Each must
+  // equal strtof's correctly rounded value bit for bit.
+  auto dir     = temp_dir{};
+  auto rng     = std::mt19937{42};
+  auto uniform = std::uniform_real_distribution<double>{-1, 1};
+  auto formats = std::vector<const char*>{"%.6g", "%.9g", "%.3f", "%.7e", "%.12f", "%.2e"};
+  auto numbers = std::vector<std::string>{};
+  for (auto i = 0; i < 30000; i++) {
+    auto value = uniform(rng) * std::pow(10.0, (int)(uniform(rng) * 12));
+    char buffer[64];
+    std::snprintf(buffer, sizeof(buffer), formats[i % formats.size()], value);
+    auto text = std::string{buffer};
+    if (i % 7 == 0 && text.rfind("0.", 0) == 0) text = text.substr(1);  // ".3" style
+    numbers.push_back(text);
+  }
+  auto text = std::string{"WorldBegin\nShape \"trianglemesh\" \"point P\" [\n"};
+  for (auto& number : numbers) text += number + "\n";
+  text += "] \"integer indices\" [ 0 1 2 ]\n";
+  auto scene = scene_data{};
+  auto error = std::string{};
+  ASSERT_TRUE(load_text(dir, text, scene, error)) << error;
+  auto& positions = scene.shapes[0].positions;
+  ASSERT_EQ(positions.size() * 3, numbers.size());
+  for (auto i = 0; i < (int)numbers.size(); i++) {
+    auto expected = std::strtof(numbers[i].c_str(), nullptr);
+    ASSERT_EQ(positions[i / 3][i % 3], expected) << numbers[i];
+  }
 }
 
 TEST(pbrtio, parameter_types) {

@@ -24,6 +24,11 @@
 #include <unordered_map>
 #include <unordered_set>
 
+#include <fcntl.h>
+#include <sys/mman.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
 #include "yocto_sceneio.h"
 
 // -----------------------------------------------------------------------------
@@ -98,6 +103,39 @@ static bool read_whole_file(
   return true;
 }
 
+// A read-only memory mapping of a plain file, unmapped when it goes out of
+// scope: large geometry files are parsed in place, without a private copy.
+struct pbrt_file_mapping {
+  void*  data = nullptr;
+  size_t size = 0;
+  pbrt_file_mapping() = default;
+  pbrt_file_mapping(const pbrt_file_mapping&) = delete;
+  pbrt_file_mapping& operator=(const pbrt_file_mapping&) = delete;
+  ~pbrt_file_mapping() {
+    if (data) munmap(data, size);
+  }
+};
+
+// Maps a plain, non-empty file; false if it is gzip'd or cannot be mapped
+// (the caller then reads it, and reports errors).
+static bool map_file(const std::string& filename, pbrt_file_mapping& mapping) {
+  if (ends_with(filename, ".gz")) return false;
+  auto fd = open(filename.c_str(), O_RDONLY);
+  if (fd < 0) return false;
+  struct stat info;
+  if (fstat(fd, &info) != 0 || !S_ISREG(info.st_mode) || info.st_size <= 0) {
+    close(fd);
+    return false;
+  }
+  auto data = mmap(nullptr, (size_t)info.st_size, PROT_READ, MAP_PRIVATE, fd, 0);
+  close(fd);
+  if (data == MAP_FAILED) return false;
+  madvise(data, (size_t)info.st_size, MADV_SEQUENTIAL);
+  mapping.data = data;
+  mapping.size = (size_t)info.st_size;
+  return true;
+}
+
 }  // namespace yocto
 
 // -----------------------------------------------------------------------------
@@ -139,24 +177,41 @@ static bool is_space(char c) {
   return c == ' ' || c == '\t' || c == '\n' || c == '\r' || c == '\f' || c == '\v';
 }
 
-// Reads the next token; on a lexical error sets `error` (file and line).
-static bool lex_token(pbrt_lexer& lexer, pbrt_token& token, std::string& error) {
+// Character classes for the lexer's inner loops: whitespace, and characters
+// that end a bare token (whitespace, brackets, quotes, comments).
+enum : unsigned char { pbrt_space = 1, pbrt_delimiter = 2 };
+static const auto pbrt_char_class = [] {
+  auto table = std::array<unsigned char, 256>{};
+  for (auto c : {' ', '\t', '\n', '\r', '\f', '\v'})
+    table[(unsigned char)c] = pbrt_space | pbrt_delimiter;
+  for (auto c : {'[', ']', '"', '#'}) table[(unsigned char)c] = pbrt_delimiter;
+  return table;
+}();
+
+// Skips whitespace and # comments, counting lines.
+static void skip_whitespace(pbrt_lexer& lexer) {
   auto& ptr = lexer.ptr;
   auto  end = lexer.end;
-  // Whitespace and # comments.
   while (ptr < end) {
-    if (*ptr == '\n') {
-      lexer.line++;
+    auto c = *ptr;
+    if (pbrt_char_class[(unsigned char)c] & pbrt_space) {
+      if (c == '\n') lexer.line++;
       ptr++;
-    } else if (is_space(*ptr)) {
-      ptr++;
-    } else if (*ptr == '#') {
-      while (ptr < end && *ptr != '\n') ptr++;
+    } else if (c == '#') {
+      auto newline = (const char*)std::memchr(ptr, '\n', (size_t)(end - ptr));
+      ptr          = newline ? newline : end;
     } else {
       break;
     }
   }
-  token = {};
+}
+
+// Reads the next token; on a lexical error sets `error` (file and line).
+static bool lex_token(pbrt_lexer& lexer, pbrt_token& token, std::string& error) {
+  skip_whitespace(lexer);
+  auto& ptr = lexer.ptr;
+  auto  end = lexer.end;
+  token     = {};
   token.line = lexer.line;
   if (ptr >= end) return true;
   auto c = *ptr;
@@ -186,9 +241,7 @@ static bool lex_token(pbrt_lexer& lexer, pbrt_token& token, std::string& error) 
     return true;
   }
   auto start = ptr;
-  while (ptr < end && !is_space(*ptr) && *ptr != '[' && *ptr != ']' &&
-         *ptr != '"' && *ptr != '#')
-    ptr++;
+  while (ptr < end && !(pbrt_char_class[(unsigned char)*ptr] & pbrt_delimiter)) ptr++;
   token.text = {start, (size_t)(ptr - start)};
   token.kind = (c >= '0' && c <= '9') || c == '-' || c == '+' || c == '.'
                    ? pbrt_token_kind::number
@@ -214,8 +267,52 @@ static bool peek_token(pbrt_lexer& lexer, pbrt_token& token, std::string& error)
   return true;
 }
 
+// Decimal numbers whose digits fit in a float's 24-bit mantissa and whose
+// exponent is at most 10 in magnitude are parsed exactly with one float
+// multiply or divide, since both operands are exact (Clinger, How to Read
+// Floating Point Numbers Accurately, PLDI 1990). Returns the end of the
+// number, or nullptr to fall back to std::from_chars.
+static const char* parse_float_fast(const char* ptr, const char* end, float& value) {
+  static const float powers[] = {1e0f, 1e1f, 1e2f, 1e3f, 1e4f, 1e5f, 1e6f, 1e7f, 1e8f, 1e9f, 1e10f};
+  auto is_digit = [&](const char* p) { return p < end && (unsigned)(*p - '0') < 10; };
+  auto negative = ptr < end && *ptr == '-';
+  if (ptr < end && (*ptr == '-' || *ptr == '+')) ptr++;
+  auto mantissa = (uint32_t)0;
+  auto digits = 0, exponent = 0;
+  for (; is_digit(ptr); ptr++, digits++) {
+    mantissa = mantissa * 10 + (uint32_t)(*ptr - '0');
+    if (mantissa > (1u << 24)) return nullptr;
+  }
+  if (ptr < end && *ptr == '.') {
+    for (ptr++; is_digit(ptr); ptr++, digits++, exponent--) {
+      mantissa = mantissa * 10 + (uint32_t)(*ptr - '0');
+      if (mantissa > (1u << 24)) return nullptr;
+    }
+  }
+  if (digits == 0) return nullptr;
+  if (ptr < end && (*ptr == 'e' || *ptr == 'E')) {
+    ptr++;
+    auto sign = 1;
+    if (ptr < end && (*ptr == '-' || *ptr == '+')) sign = *ptr++ == '-' ? -1 : 1;
+    if (!is_digit(ptr)) return nullptr;
+    auto e = 0;
+    for (; is_digit(ptr); ptr++) {
+      e = e * 10 + (*ptr - '0');
+      if (e > 100) return nullptr;
+    }
+    exponent += sign * e;
+  }
+  if (exponent < -10 || exponent > 10) return nullptr;
+  auto result = exponent < 0 ? (float)mantissa / powers[-exponent]
+                             : (float)mantissa * powers[exponent];
+  value = negative ? -result : result;
+  return ptr;
+}
+
 // Parses a whole token as a float; `.3`, `-0`, `+1`, `1e-3` are numbers.
 static bool parse_float(std::string_view text, float& value) {
+  auto fast_end = parse_float_fast(text.data(), text.data() + text.size(), value);
+  if (fast_end == text.data() + text.size()) return true;
   if (!text.empty() && text[0] == '+') text.remove_prefix(1);
   if (text.empty()) return false;
   auto result = std::from_chars(text.data(), text.data() + text.size(), value);
@@ -258,14 +355,16 @@ static std::string unescape_string(const pbrt_token& token) {
 // -----------------------------------------------------------------------------
 namespace yocto {
 
-// One "type name" value list. Booleans are stored as numbers 0/1.
+// One "type name" value list. Booleans are stored as numbers 0/1. Type and
+// name point into the file buffer, valid while the directive is parsed.
 struct pbrt_param {
-  std::string              type    = "";
-  std::string              name    = "";
+  std::string_view         type    = {};
+  std::string_view         name    = {};
   std::vector<float>       numbers = {};
   std::vector<std::string> strings = {};
   int                      line    = 0;
   bool                     used    = false;
+  bool                     integer = false;  // values must be integral
 };
 
 // Parameters of the current directive; entries are reused to avoid
@@ -278,10 +377,10 @@ struct pbrt_param_list {
 enum struct pbrt_value_kind { numbers, strings, bools, spectrum };
 
 static bool param_value_kind(std::string_view type, pbrt_value_kind& kind) {
-  static const auto number_types = std::unordered_set<std::string_view>{"float",
-      "integer", "point", "point2", "point3", "vector", "vector2", "vector3",
-      "normal", "normal3", "rgb", "color", "blackbody"};
-  if (number_types.count(type)) {
+  if (type == "float" || type == "point" || type == "point3" || type == "integer" ||
+      type == "rgb" || type == "normal" || type == "normal3" || type == "point2" ||
+      type == "vector" || type == "vector2" || type == "vector3" || type == "color" ||
+      type == "blackbody") {
     kind = pbrt_value_kind::numbers;
   } else if (type == "string" || type == "texture") {
     kind = pbrt_value_kind::strings;
@@ -358,8 +457,11 @@ struct pbrt_state {
   std::vector<material_data>                           materials = {};
   std::vector<std::string>                             material_names = {};
   std::unordered_map<std::string, int>                 named_materials = {};
-  std::map<std::tuple<int, float, float, float>, int>  scene_materials = {};
+  std::map<std::tuple<int, float, float, float>, int> scene_materials = {};
   std::unordered_map<std::string, pbrt_texture>        textures = {};
+  int   last_material       = -1;  // cache of current_scene_material
+  vec3f last_emission       = {0, 0, 0};
+  int   last_scene_material = -1;
 
   // Curve groups and a cache of the last one used.
   std::map<std::pair<int, std::array<float, 12>>, int> group_keys = {};
@@ -367,6 +469,8 @@ struct pbrt_state {
   int                                                  last_group = -1;
   int     last_group_material = -1;
   frame3f last_group_ctm      = {};
+
+  std::vector<std::array<vec3f, 4>> segments = {};  // reused by each curve
 
   pbrt_camera_state camera     = {};
   bool              has_camera = false;
@@ -407,7 +511,7 @@ static void warn_once(pbrt_state& state, const std::string& key, const std::stri
 }
 
 static std::string param_decl(const pbrt_param& param) {
-  return "\"" + param.type + " " + param.name + "\"";
+  return "\"" + std::string{param.type} + " " + std::string{param.name} + "\"";
 }
 
 // Finds a parameter by name and marks it used.
@@ -448,7 +552,7 @@ static bool texture_constant(pbrt_state& state, const pbrt_param& param, vec3f& 
     value = it->second.value;
     return true;
   }
-  warn_once(state, "texture " + param.name + param.strings[0],
+  warn_once(state, "texture " + std::string{param.name} + param.strings[0],
       directive_name(state) + ": texture \"" + param.strings[0] + "\" for " +
           param_decl(param) + " is not supported; using a constant");
   return false;
@@ -608,7 +712,7 @@ static bool parse_param_value(pbrt_state& state, pbrt_param& param,
       return bad("a string");
     auto value = 0.0f;
     if (!parse_float(token.text, value)) return bad("a number");
-    if (param.type == "integer" && value != std::floor(value)) return bad("an integer");
+    if (param.integer && value != std::floor(value)) return bad("an integer");
     param.numbers.push_back(value);
     return true;
   }
@@ -665,17 +769,32 @@ static bool parse_params(pbrt_state& state) {
     }
     if (list.count == (int)list.items.size()) list.items.emplace_back();
     auto& param = list.items[list.count++];
-    param.type.assign(type);
-    param.name.assign(name);
+    param.type = type;
+    param.name = name;
     param.numbers.clear();
     param.strings.clear();
-    param.line = token.line;
-    param.used = false;
+    param.line    = token.line;
+    param.used    = false;
+    param.integer = type == "integer";
     // Values: a bracketed list or a single value.
     if (!next_token(lexer, token, state.error)) return false;
     if (token.kind == pbrt_token_kind::open) {
       auto open_line = token.line;
       while (true) {
+        // Fast path for the common case, a plain number: parse it in place.
+        if (kind == pbrt_value_kind::numbers) {
+          skip_whitespace(lexer);
+          auto value      = 0.0f;
+          auto number_end = parse_float_fast(lexer.ptr, lexer.end, value);
+          if (number_end &&
+              (number_end == lexer.end ||
+                  (pbrt_char_class[(unsigned char)*number_end] & pbrt_delimiter)) &&
+              (!param.integer || value == std::floor(value))) {
+            param.numbers.push_back(value);
+            lexer.ptr = number_end;
+            continue;
+          }
+        }
         if (!next_token(lexer, token, state.error)) return false;
         if (token.kind == pbrt_token_kind::close) break;
         if (token.kind == pbrt_token_kind::eof || token.kind == pbrt_token_kind::open) {
@@ -914,13 +1033,11 @@ static material_data make_pbrt_material(pbrt_state& state, std::string_view type
   return material;
 }
 
-// Scene material for the current material and area light, made on first use.
-static int current_scene_material(pbrt_state& state) {
+// Adds the scene material for a (declared material, emission) key.
+using pbrt_material_key = std::tuple<int, float, float, float>;
+static std::map<pbrt_material_key, int>::iterator add_scene_material(
+    pbrt_state& state, const pbrt_material_key& key) {
   auto& graphics = state.graphics;
-  auto  key      = std::tuple{graphics.material, graphics.emission.x, graphics.emission.y,
-      graphics.emission.z};
-  auto  it       = state.scene_materials.find(key);
-  if (it != state.scene_materials.end()) return it->second;
   auto& scene    = *state.scene;
   auto  material = state.materials[graphics.material];
   material.emission = graphics.emission;
@@ -934,8 +1051,23 @@ static int current_scene_material(pbrt_state& state) {
   }
   scene.materials.push_back(material);
   scene.material_names.push_back(name);
-  state.scene_materials[key] = (int)scene.materials.size() - 1;
-  return (int)scene.materials.size() - 1;
+  return state.scene_materials.emplace(key, (int)scene.materials.size() - 1).first;
+}
+
+
+// Scene material for the current material and area light, made on first use.
+static int current_scene_material(pbrt_state& state) {
+  auto& graphics = state.graphics;
+  if (graphics.material == state.last_material && graphics.emission == state.last_emission)
+    return state.last_scene_material;
+  auto  key      = std::tuple{graphics.material, graphics.emission.x, graphics.emission.y,
+      graphics.emission.z};
+  auto  it       = state.scene_materials.find(key);
+  if (it == state.scene_materials.end()) it = add_scene_material(state, key);
+  state.last_material       = graphics.material;
+  state.last_emission       = graphics.emission;
+  state.last_scene_material = it->second;
+  return it->second;
 }
 
 }  // namespace yocto
@@ -1128,9 +1260,8 @@ static bool parse_curve(pbrt_state& state) {
   auto  cp         = [&](int i) {
     return vec3f{(*points)[3 * i], (*points)[3 * i + 1], (*points)[3 * i + 2]};
   };
-  auto  segments = std::vector<std::array<vec3f, 4>>{};
-  auto& p        = *points;
-  (void)p;
+  auto& segments = state.segments;
+  segments.clear();
   if (basis == "bezier" && degree == 3) {
     if (num_points < 4 || (num_points - 1) % 3 != 0) {
       set_error(state, "a cubic Bezier curve needs 4 + 3n control points, got " +
@@ -1488,8 +1619,9 @@ static bool parse_camera(pbrt_state& state) {
 
 // One directive; the directive name has been read.
 static bool parse_directive(pbrt_state& state, std::string_view directive) {
-  auto& scene    = *state.scene;
-  state.type     = {};
+  auto& scene      = *state.scene;
+  state.type       = {};
+  state.list.count = 0;
   auto with_type = [&](const char* what) { return parse_string(state, state.type, what); };
   if (directive == "Shape") {
     if (!with_type("a shape type") || !parse_params(state) || !parse_shape(state)) return false;
@@ -1625,9 +1757,15 @@ static bool parse_pbrt_file(pbrt_state& state, const std::string& filename, int 
   }
   auto lexer     = pbrt_lexer{};
   lexer.filename = filename;
-  if (!read_whole_file(filename, lexer.data, state.error)) return false;
-  lexer.ptr = lexer.data.data();
-  lexer.end = lexer.data.data() + lexer.data.size();
+  auto mapping   = pbrt_file_mapping{};
+  if (map_file(filename, mapping)) {
+    lexer.ptr = (const char*)mapping.data;
+    lexer.end = lexer.ptr + mapping.size;
+  } else {
+    if (!read_whole_file(filename, lexer.data, state.error)) return false;
+    lexer.ptr = lexer.data.data();
+    lexer.end = lexer.data.data() + lexer.data.size();
+  }
   auto ec   = std::error_code{};
   auto canonical = std::filesystem::weakly_canonical(filename, ec).string();
   state.open_files.push_back(ec ? filename : canonical);
