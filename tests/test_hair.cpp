@@ -13,6 +13,7 @@
 #include <cmath>
 #include <cstdio>
 #include <functional>
+#include <limits>
 #include <vector>
 
 using namespace yocto;
@@ -805,3 +806,26 @@ static void test_chi2_cases(bool four_numbers, uint64_t seed) {
 // p < 0.001 for all 14 sets; the variance 5% too wide, for 12 of 14.
 TEST(hair, chi_square_two_number_sampler) { test_chi2_cases(false, 1000); }
 TEST(hair, chi_square_four_number_sampler) { test_chi2_cases(true, 2000); }
+
+TEST(hair, non_finite_material_values_stay_finite) {
+  // Garbage in a material (NaN, inf) must not reach the renderer as NaN.
+  auto nan = std::numeric_limits<float>::quiet_NaN();
+  auto inf = std::numeric_limits<float>::infinity();
+  auto materials = std::vector<hair_material>(4);
+  materials[0].beta_m = nan, materials[0].beta_n = nan, materials[0].alpha = nan;
+  materials[1].eta = inf, materials[1].alpha = inf;
+  materials[2].has_sigma_a = true, materials[2].sigma_a = {inf, nan, 1};
+  materials[3].eta = nan, materials[3].has_color = true, materials[3].color = {nan, 0, 2};
+  auto rng = make_rng(3);
+  for (auto& material : materials) {
+    for (auto i = 0; i < 1000; i++) {
+      auto brdf = eval_hair_brdf(material, 2 * rand1f(rng) - 1, frame3f{});
+      auto wo   = sample_sphere(rand2f(rng));
+      auto wi   = sample_hair_scattering(brdf, wo, rand2f(rng));
+      auto f    = eval_hair_scattering(brdf, wo, wi);
+      auto pdf  = sample_hair_scattering_pdf(brdf, wo, wi);
+      ASSERT_TRUE(isfinite(wi) && isfinite(f) && std::isfinite(pdf));
+      ASSERT_TRUE(min_component(f) >= 0 && pdf >= 0);
+    }
+  }
+}

@@ -182,7 +182,9 @@ hair_precomputed make_hair_precomputed(const hair_material& material) {
   if (!(beta_n == beta_n)) beta_n = 0.3f;
   pre.beta_m = beta_m;
   pre.beta_n = beta_n;
-  pre.eta    = material.eta >= 1 ? material.eta : 1.0f;
+  // eta < 1 has no meaning for a fiber in air; inf would make Fresnel NaN.
+  pre.eta = material.eta == material.eta ? std::clamp(material.eta, 1.0f, 1e3f)
+                                         : 1.55f;
 
   // Precedence as pbrt: sigma_a, else colour, else melanin.
   if (material.has_sigma_a) {
@@ -219,7 +221,7 @@ hair_precomputed make_hair_precomputed(const hair_material& material) {
 
   // Scale tilt: sines and cosines of alpha, 2 alpha and 4 alpha by the double
   // angle formulas.
-  auto alpha           = radians(material.alpha == material.alpha ? material.alpha : 0);
+  auto alpha = std::isfinite(material.alpha) ? radians(material.alpha) : 0.0f;
   pre.sin_2k_alpha[0] = std::sin(alpha);
   pre.cos_2k_alpha[0] = std::cos(alpha);
   for (auto k = 1; k < 3; k++) {
@@ -287,8 +289,8 @@ static float relative_phi(const hair_angles& wo, const hair_angles& wi) {
 }
 
 // Terms that depend on theta_o (and the hit): attenuations A_p, lobe pdfs
-// proportional to their luminance, azimuthal offsets Phi(p, h), and the
-// tilted sin/cos of theta_o for each longitudinal lobe.
+// (filled by make_lobe_pdfs), azimuthal offsets Phi(p, h), and the tilted
+// sin/cos of theta_o for each longitudinal lobe.
 struct hair_lobes {
   vec3f a[4]          = {};
   float a_pdf[4]      = {0, 0, 0, 0};
@@ -344,13 +346,6 @@ static hair_lobes make_lobes(const hair_brdf& brdf, const hair_angles& wo) {
   auto denom = glm::max(vec3f{1, 1, 1} - t * f, vec3f{1e-6f});
   lobes.a[3] = lobes.a[2] * t * f / denom;
 
-  // Lobe choice proportional to luminance (hair.pdf "Sampling").
-  auto total = 0.0f;
-  for (auto p = 0; p < 4; p++) total += lobes.a_pdf[p] = luminance(lobes.a[p]);
-  if (total > 0) {
-    for (auto p = 0; p < 4; p++) lobes.a_pdf[p] /= total;
-  }
-
   // hair.pdf eq. 10: Phi(p, h) = 2 p gamma_t - 2 gamma_o + p pi.
   for (auto p = 0; p < 3; p++) {
     lobes.phi_shift[p] = 2 * p * gamma_t - 2 * brdf.gamma_o + p * pif;
@@ -371,6 +366,16 @@ static hair_lobes make_lobes(const hair_brdf& brdf, const hair_angles& wo) {
   lobes.cos_theta[3] = cos_o;
   for (auto p = 0; p < 4; p++) lobes.cos_theta[p] = std::abs(lobes.cos_theta[p]);
   return lobes;
+}
+
+// Lobe choice proportional to the luminance of A_p (hair.pdf "Sampling");
+// all zero if the fiber returns nothing.
+static void make_lobe_pdfs(hair_lobes& lobes) {
+  auto total = 0.0f;
+  for (auto p = 0; p < 4; p++) total += lobes.a_pdf[p] = luminance(lobes.a[p]);
+  if (total > 0) {
+    for (auto p = 0; p < 4; p++) lobes.a_pdf[p] /= total;
+  }
 }
 
 // Angle wrapped into [-pi, pi] without loops (a NaN stays a NaN, never hangs).
@@ -431,6 +436,7 @@ float sample_hair_scattering_pdf(
   auto  wi    = make_angles(brdf, incoming);
   auto  lobes = make_lobes(brdf, wo);
   auto  phi   = relative_phi(wo, wi);
+  make_lobe_pdfs(lobes);
 
   // Same lobes as eval, weighted by the lobe choice instead of A_p.
   auto pdf = 0.0f;
@@ -460,6 +466,7 @@ vec3f sample_hair_scattering(
   auto& mat   = brdf.material;
   auto  wo    = make_angles(brdf, outgoing);
   auto  lobes = make_lobes(brdf, wo);
+  make_lobe_pdfs(lobes);
 
   // Lobe p with probability a_pdf[p].
   auto p = 0, last = -1;

@@ -50,7 +50,7 @@ struct hair_material {
 // Index p: 0 = R, 1 = TT, 2 = TRT, 3 = all higher orders (p_max).
 struct hair_precomputed {
   vec3f sigma_a        = {0, 0, 0};  // absorption per unit radius
-  float eta            = 1.55f;      // clamped to at least 1
+  float eta            = 1.55f;      // clamped to [1, 1000]
   float beta_m         = 0.3f;       // clamped to [0.01, 1]
   float beta_n         = 0.3f;       // clamped to [0.01, 1]
   float v[4]           = {0, 0, 0, 0};  // longitudinal variances
