@@ -1,0 +1,211 @@
+//
+// End-to-end tests of the yscene command line: bad input gives a one-line
+// error naming the file, exit status 1 and no output; renders are complete,
+// deterministic across thread counts, and survive Ctrl-C.
+//
+
+#include <gtest/gtest.h>
+#include <sys/wait.h>
+#include <yocto/yocto_sceneio.h>
+
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+
+using namespace yocto;
+namespace fs = std::filesystem;
+
+struct command_result {
+  int         status = -1;
+  std::string output = "";  // stdout and stderr together
+};
+
+static command_result run(const std::string& arguments) {
+  auto command = std::string(YSCENE_EXE) + " " + arguments + " 2>&1";
+  auto pipe    = popen(command.c_str(), "r");
+  auto result  = command_result{};
+  if (!pipe) return result;
+  char buffer[4096];
+  while (auto read = fread(buffer, 1, sizeof(buffer), pipe)) result.output.append(buffer, read);
+  auto status   = pclose(pipe);
+  result.status = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  return result;
+}
+
+// A fresh temporary directory per test.
+static fs::path make_test_dir(const std::string& name) {
+  auto dir = fs::temp_directory_path() / ("yscene-cli-" + name + "-" + std::to_string(getpid()));
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  return dir;
+}
+
+static void write_file(const fs::path& path, const std::string& text) {
+  auto stream = std::ofstream(path, std::ios::binary);
+  stream << text;
+}
+
+// Files left in a directory (to catch temporaries left behind).
+static std::vector<std::string> list_files(const fs::path& dir) {
+  auto files = std::vector<std::string>{};
+  for (auto& entry : fs::recursive_directory_iterator(dir))
+    if (entry.is_regular_file()) files.push_back(entry.path().filename().string());
+  std::sort(files.begin(), files.end());
+  return files;
+}
+
+// A tiny valid scene: a matte sphere under a constant sky.
+static void write_small_scene(const fs::path& dir) {
+  auto scene = scene_data{};
+  auto camera = camera_data{};
+  camera.frame = lookat_frame({0, 0, 4}, {0, 0, 0}, {0, 1, 0});
+  scene.cameras.push_back(camera);
+  scene.camera_names.push_back("camera");
+  scene.environments.push_back({identity3x4f, {1, 1, 1}, -1});
+  scene.environment_names.push_back("sky");
+  scene.shapes.push_back(make_sphere_shape(16, 1));
+  scene.shape_names.push_back("sphere");
+  auto material  = material_data{};
+  material.color = {0.5f, 0.5f, 0.5f};
+  scene.materials.push_back(material);
+  scene.material_names.push_back("grey");
+  scene.instances.push_back({identity3x4f, 0, 0});
+  scene.instance_names.push_back("sphere");
+  auto error = std::string{};
+  ASSERT_TRUE(save_scene((dir / "scene.json").string(), scene, error)) << error;
+}
+
+static void expect_failure(const command_result& result, const std::string& names) {
+  EXPECT_EQ(result.status, 1) << result.output;
+  EXPECT_NE(result.output.find("error: "), std::string::npos) << result.output;
+  EXPECT_NE(result.output.find(names), std::string::npos) << result.output;
+}
+
+TEST(cli, missing_scene_file) {
+  auto dir    = make_test_dir("missing");
+  auto result = run((dir / "nothere.json").string() + " --output x.png");  // no command
+  EXPECT_EQ(result.status, 1);
+  result = run("render " + (dir / "nothere.json").string() + " --output " +
+               (dir / "out.png").string());
+  expect_failure(result, "nothere.json");
+  EXPECT_TRUE(list_files(dir).empty());
+}
+
+TEST(cli, malformed_json_names_file_and_line) {
+  auto dir = make_test_dir("json");
+  write_file(dir / "bad.json", "{\n  \"cameras\": [\n    {\"lens\": 0.05,}\n  ]\n}\n");
+  auto result = run("render " + (dir / "bad.json").string() + " --output " +
+                    (dir / "out.png").string());
+  expect_failure(result, "bad.json");
+  EXPECT_NE(result.output.find("line 3"), std::string::npos) << result.output;
+  EXPECT_FALSE(fs::exists(dir / "out.png"));
+}
+
+TEST(cli, wrong_types_and_references_are_errors) {
+  auto dir = make_test_dir("types");
+  write_file(dir / "types.json", R"({"cameras": [{"lens": "long"}]})");
+  expect_failure(run("render " + (dir / "types.json").string() + " -o " +
+                     (dir / "out.png").string()), "lens");
+  write_file(dir / "refs.json",
+      R"({"materials": [{"type": "matte"}], "instances": [{"shape": 3, "material": 0}]})");
+  expect_failure(run("render " + (dir / "refs.json").string() + " -o " +
+                     (dir / "out.png").string()), "shape");
+  EXPECT_FALSE(fs::exists(dir / "out.png"));
+}
+
+TEST(cli, missing_and_truncated_ply) {
+  auto dir = make_test_dir("ply");
+  write_small_scene(dir);
+  // Truncate the sphere's PLY in the middle of its vertex data.
+  auto ply  = dir / "shapes" / "sphere.ply";
+  auto size = fs::file_size(ply);
+  fs::resize_file(ply, size / 2);
+  expect_failure(run("render " + (dir / "scene.json").string() + " -o " +
+                     (dir / "out.exr").string()), "sphere.ply");
+  fs::remove(ply);
+  expect_failure(run("render " + (dir / "scene.json").string() + " -o " +
+                     (dir / "out.exr").string()), "sphere.ply");
+  EXPECT_FALSE(fs::exists(dir / "out.exr"));
+}
+
+TEST(cli, unreadable_texture) {
+  auto dir = make_test_dir("texture");
+  write_file(dir / "sky.hdr", "this is not an image");
+  write_file(dir / "scene.json", R"({"cameras": [{"lookat": [0, 0, 4, 0, 0, 0, 0, 1, 0]}],
+    "textures": [{"name": "sky", "uri": "sky.hdr"}],
+    "environments": [{"emission": [1, 1, 1], "emission_tex": 0}]})");
+  expect_failure(run("render " + (dir / "scene.json").string() + " -o " +
+                     (dir / "out.png").string()), "sky.hdr");
+  EXPECT_FALSE(fs::exists(dir / "out.png"));
+}
+
+TEST(cli, unknown_output_extension) {
+  auto dir = make_test_dir("extension");
+  write_small_scene(dir);
+  expect_failure(run("render " + (dir / "scene.json").string() + " -o " +
+                     (dir / "out.xyz").string()), "out.xyz");
+  EXPECT_FALSE(fs::exists(dir / "out.xyz"));
+}
+
+TEST(cli, render_writes_a_complete_image_and_nothing_else) {
+  auto dir = make_test_dir("render");
+  write_small_scene(dir);
+  auto before = list_files(dir);
+  for (auto name : {"out.png", "out.exr", "out.hdr", "out.pfm", "out.jpg"}) {
+    auto result = run("render " + (dir / "scene.json").string() + " -o " +
+                      (dir / name).string() + " -s 2 -r 32 --quiet");
+    EXPECT_EQ(result.status, 0) << result.output;
+    EXPECT_NE(result.output.find("rays/s"), std::string::npos) << result.output;
+    auto image = texture_data{};
+    auto error = std::string{};
+    EXPECT_TRUE(load_image((dir / name).string(), image, error)) << error;
+    EXPECT_EQ(image.width, 32);
+  }
+  auto after = list_files(dir);
+  EXPECT_EQ(after.size(), before.size() + 5);  // no temporaries left
+}
+
+TEST(cli, threads_one_and_two_give_the_same_image) {
+  auto dir = make_test_dir("threads");
+  ASSERT_EQ(run("hair --style curly --strands 200 -o " + (dir / "hair.json").string()).status, 0);
+  for (auto threads : {1, 2}) {
+    auto result = run("render " + (dir / "hair.json").string() + " -o " +
+                      (dir / ("t" + std::to_string(threads) + ".exr")).string() +
+                      " -s 2 -r 40 --quiet --threads " + std::to_string(threads));
+    ASSERT_EQ(result.status, 0) << result.output;
+  }
+  auto one = texture_data{}, two = texture_data{};
+  auto error = std::string{};
+  ASSERT_TRUE(load_image((dir / "t1.exr").string(), one, error)) << error;
+  ASSERT_TRUE(load_image((dir / "t2.exr").string(), two, error)) << error;
+  EXPECT_EQ(one.pixels, two.pixels);
+}
+
+TEST(cli, sigint_saves_the_samples_done) {
+  auto dir = make_test_dir("sigint");
+  ASSERT_EQ(run("hair --style straight --strands 500 -o " + (dir / "hair.json").string()).status, 0);
+  // Far more samples than 2 seconds allow; SIGINT after 2 seconds.
+  auto command = "timeout --preserve-status -s INT 2 " + std::string(YSCENE_EXE) + " render " +
+                 (dir / "hair.json").string() + " -o " + (dir / "out.exr").string() +
+                 " -s 100000 -r 32 2>&1";
+  auto pipe   = popen(command.c_str(), "r");
+  auto output = std::string{};
+  char buffer[4096];
+  while (auto read = fread(buffer, 1, sizeof(buffer), pipe)) output.append(buffer, read);
+  auto status = pclose(pipe);
+  ASSERT_TRUE(WIFEXITED(status));
+  EXPECT_EQ(WEXITSTATUS(status), 0) << output;
+  EXPECT_NE(output.find("interrupted"), std::string::npos) << output;
+  auto image = texture_data{};
+  auto error = std::string{};
+  EXPECT_TRUE(load_image((dir / "out.exr").string(), image, error)) << error;
+}
+
+TEST(cli, info_prints_counts) {
+  auto dir = make_test_dir("info");
+  ASSERT_EQ(run("hair --style block --strands 100 --segments 2 -o " + (dir / "block.json").string()).status, 0);
+  auto result = run("info " + (dir / "block.json").string());
+  EXPECT_EQ(result.status, 0) << result.output;
+  EXPECT_NE(result.output.find("fiber segments: 200"), std::string::npos) << result.output;
+  EXPECT_NE(result.output.find("bounds:"), std::string::npos) << result.output;
+}
