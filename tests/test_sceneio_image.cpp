@@ -47,7 +47,7 @@ void write_8bit(const std::string& filename, int width, int height, int channels
 
 }  // namespace
 
-TEST(image, exr_and_pfm_round_trips_are_exact) {
+static void exr_and_pfm_round_trips_are_exact() {
   auto dir = scratch_directory("image-float");
   for (auto name : {"image.exr", "image.pfm"}) {
     auto image = make_image(7, 5, 40);
@@ -62,7 +62,7 @@ TEST(image, exr_and_pfm_round_trips_are_exact) {
   EXPECT_EQ(list_files(dir.path), (std::vector<std::string>{"image.exr", "image.pfm"}));
 }
 
-TEST(image, hdr_round_trip_is_within_rgbe_precision) {
+static void hdr_round_trip_is_within_rgbe_precision() {
   auto dir   = scratch_directory("image-hdr");
   auto image = make_image(6, 4, 25);
   auto error = std::string{};
@@ -77,7 +77,7 @@ TEST(image, hdr_round_trip_is_within_rgbe_precision) {
       EXPECT_NEAR(loaded.pixels[i][c], image.pixels[i][c], max_component(image.pixels[i]) / 128);
 }
 
-TEST(image, png_round_trip_is_within_quantisation_with_exposure) {
+static void png_round_trip_is_within_quantisation_with_exposure() {
   auto dir = scratch_directory("image-png");
   for (auto exposure : {0.0f, 1.0f}) {
     auto image = make_image(9, 6, 0.9f);
@@ -107,7 +107,7 @@ TEST(image, png_round_trip_is_within_quantisation_with_exposure) {
     EXPECT_NEAR(encode_srgb(loaded.pixels[i].y), encode_srgb(image.pixels[i].y), 0.05f);
 }
 
-TEST(image, grey_becomes_rgb_and_alpha_is_dropped) {
+static void grey_becomes_rgb_and_alpha_is_dropped() {
   auto dir = scratch_directory("image-channels");
   write_8bit(dir.file("grey.png"), 2, 1, 1, {0, 255});
   write_8bit(dir.file("rgba.png"), 1, 1, 4, {255, 188, 0, 10});
@@ -123,7 +123,7 @@ TEST(image, grey_becomes_rgb_and_alpha_is_dropped) {
   EXPECT_EQ(image.pixels[0].z, 0);
 }
 
-TEST(image, bad_inputs_fail_naming_the_file_and_leave_nothing) {
+static void bad_inputs_fail_naming_the_file_and_leave_nothing() {
   auto dir   = scratch_directory("image-errors");
   auto image = make_image(4, 3, 1);
   auto error = std::string{};
@@ -156,7 +156,7 @@ TEST(image, bad_inputs_fail_naming_the_file_and_leave_nothing) {
   EXPECT_FALSE(is_image_filename("png"));
 }
 
-TEST(files, paths_and_temporary_names) {
+static void paths_and_temporary_names() {
   EXPECT_EQ(path_dirname("a/b/c.json"), "a/b/");
   EXPECT_EQ(path_dirname("c.json"), "");
   EXPECT_EQ(path_extension("a.b/c.PLY"), ".ply");
@@ -200,4 +200,18 @@ TEST(image, loads_the_real_pbrt_sky_pfm) {
     bottom += image.pixels[(size_t)(image.height - 1) * image.width + i];
   }
   EXPECT_GT(luminance(top), luminance(bottom));
+}
+
+// Grouped so that ctest starts few processes: each one pays for loading
+// OpenImageIO and its libraries (about 0.3 s).
+TEST(image, round_trips_in_every_format_and_reads_grey_and_alpha) {
+  exr_and_pfm_round_trips_are_exact();
+  hdr_round_trip_is_within_rgbe_precision();
+  png_round_trip_is_within_quantisation_with_exposure();
+  grey_becomes_rgb_and_alpha_is_dropped();
+}
+
+TEST(image, rejects_bad_input_and_file_helpers_work) {
+  bad_inputs_fail_naming_the_file_and_leave_nothing();
+  paths_and_temporary_names();
 }

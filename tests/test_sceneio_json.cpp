@@ -291,7 +291,7 @@ bool any_warning(const std::vector<std::string>& warnings, const std::vector<std
 
 }  // namespace
 
-TEST(json, round_trips_every_element_with_binary_and_ascii_shapes) {
+static void round_trips_every_element_with_binary_and_ascii_shapes() {
   auto scene = make_test_scene();
   expect_round_trip(scene, "round-trip-binary", false);
   expect_round_trip(scene, "round-trip-ascii", true);
@@ -313,7 +313,7 @@ TEST(json, round_trips_every_element_with_binary_and_ascii_shapes) {
   EXPECT_EQ(js["cameras"][0]["lens"], 0.035);
 }
 
-TEST(json, saves_names_that_are_missing_or_clash) {
+static void saves_names_that_are_missing_or_clash() {
   auto scene           = make_test_scene();
   scene.shape_names    = {"a/b", "a/b", ""};
   scene.texture_names  = {};  // shorter than the textures: unnamed
@@ -329,7 +329,7 @@ TEST(json, saves_names_that_are_missing_or_clash) {
   EXPECT_EQ(loaded.texture_names, (std::vector<std::string>{"", ""}));
 }
 
-TEST(json, loads_the_40_layout_and_round_trips_it) {
+static void loads_the_40_layout_and_round_trips_it() {
   auto dir = scratch_directory("layout-40");
   write_fixture_files(dir.path);
   write_file(dir.file("scene.json"), layout_40_json);
@@ -387,7 +387,7 @@ TEST(json, loads_the_40_layout_and_round_trips_it) {
   expect_round_trip(scene, "layout-40-saved", false);
 }
 
-TEST(json, loads_the_mixed_layout_with_aliases_and_warns_about_extra_keys) {
+static void loads_the_mixed_layout_with_aliases_and_warns_about_extra_keys() {
   auto dir = scratch_directory("layout-mixed");
   write_fixture_files(dir.path);
   write_file(dir.file("scene.json"), layout_mixed_json);
@@ -542,7 +542,7 @@ std::string scene_with(const std::string& material, const std::string& instance 
 
 }  // namespace
 
-TEST(json, rejects_bad_files_naming_file_and_place) {
+static void rejects_bad_files_naming_file_and_place() {
   auto dir = scratch_directory("json-errors");
   auto error = std::string{};
   auto scene = scene_data{};
@@ -556,7 +556,7 @@ TEST(json, rejects_bad_files_naming_file_and_place) {
   expect_scene_error(dir, "[1, 2]", {"expected a json object"});
 }
 
-TEST(json, rejects_wrong_types_and_references) {
+static void rejects_wrong_types_and_references() {
   auto dir = scratch_directory("json-types");
   auto m   = std::string(R"({"name": "m", "type": "hair"})");
   expect_scene_error(dir, R"({"cameras": [{"name": "cam", "lens": "long"}]})",
@@ -592,7 +592,7 @@ TEST(json, rejects_wrong_types_and_references) {
       {"material \"m\"", "\"type\"", "expected a string"});
 }
 
-TEST(json, rejects_bad_hair_values) {
+static void rejects_bad_hair_values() {
   auto dir   = scratch_directory("json-hair");
   auto cases = std::vector<std::pair<std::string, std::string>>{
       {R"("beta_m": 1.5)", "\"beta_m\""}, {R"("betaN": -0.1)", "\"betaN\""},
@@ -607,7 +607,7 @@ TEST(json, rejects_bad_hair_values) {
         {"material \"m\"", part});
 }
 
-TEST(json, rejects_missing_files_and_hair_on_triangles) {
+static void rejects_missing_files_and_hair_on_triangles() {
   auto dir = scratch_directory("json-files");
   expect_scene_error(dir,
       R"({"shapes": [{"name": "hair", "uri": "shapes/missing.ply"}],
@@ -633,7 +633,7 @@ TEST(json, rejects_missing_files_and_hair_on_triangles) {
       {"instance \"inst\"", "shape \"quad\"", "material \"m\""});
 }
 
-TEST(json, failed_saves_leave_nothing_behind) {
+static void failed_saves_leave_nothing_behind() {
   auto dir   = scratch_directory("json-save-errors");
   auto error = std::string{};
   // An invalid scene is refused before anything is written.
@@ -720,4 +720,24 @@ TEST(json, loads_every_real_yocto_scene_with_standin_hair) {
     }
     EXPECT_GT(hair_instances, 0);
   }
+}
+
+// Grouped so that ctest starts few processes: each one pays for loading
+// OpenImageIO and its libraries (about 0.3 s).
+TEST(json, round_trips_the_42_layout) {
+  round_trips_every_element_with_binary_and_ascii_shapes();
+  saves_names_that_are_missing_or_clash();
+}
+
+TEST(json, loads_the_40_and_mixed_layouts) {
+  loads_the_40_layout_and_round_trips_it();
+  loads_the_mixed_layout_with_aliases_and_warns_about_extra_keys();
+}
+
+TEST(json, rejects_bad_input_naming_file_and_place) {
+  rejects_bad_files_naming_file_and_place();
+  rejects_wrong_types_and_references();
+  rejects_bad_hair_values();
+  rejects_missing_files_and_hair_on_triangles();
+  failed_saves_leave_nothing_behind();
 }
