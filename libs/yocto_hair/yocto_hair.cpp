@@ -406,52 +406,45 @@ static float sample_azimuthal(const hair_precomputed& mat, float u) {
 // -----------------------------------------------------------------------------
 namespace yocto {
 
-vec3f eval_hair_scattering(
-    const hair_brdf& brdf, const vec3f& outgoing, const vec3f& incoming) {
-  auto& mat   = brdf.material;
-  auto  wo    = make_angles(brdf, outgoing);
-  auto  wi    = make_angles(brdf, incoming);
-  auto  lobes = make_lobes(brdf, wo);
-  auto  phi   = relative_phi(wo, wi);
-
-  // hair.pdf eq. 3 is f = sum_p M_p A_p N_p / |cos theta_i|; the tracer
-  // needs f times the cosine, so the sum itself is returned.
-  auto sum = vec3f{0, 0, 0};
-  for (auto p = 0; p < 3; p++) {
+// M_p N_p of each lobe for a pair of directions (N = 1 / 2 pi for p_max), the
+// part that eval and pdf share; they weight it by A_p and by the lobe choice.
+static void eval_lobe_products(const hair_brdf& brdf, const vec3f& outgoing,
+    const vec3f& incoming, hair_lobes& lobes, float products[4]) {
+  auto& mat = brdf.material;
+  auto  wo  = make_angles(brdf, outgoing);
+  auto  wi  = make_angles(brdf, incoming);
+  auto  phi = relative_phi(wo, wi);
+  lobes     = make_lobes(brdf, wo);
+  for (auto p = 0; p < 4; p++) {
     auto m = eval_longitudinal(mat.v[p], mat.m_scale[p], wi.sin_theta,
         wi.cos_theta, lobes.sin_theta[p], lobes.cos_theta[p]);
-    auto n = eval_azimuthal(mat, wrap_angle(phi - lobes.phi_shift[p]));
-    sum += m * n * lobes.a[p];
+    auto n = p < 3 ? eval_azimuthal(mat, wrap_angle(phi - lobes.phi_shift[p]))
+                   : 1 / (2 * pif);
+    products[p] = m * n;
   }
-  auto m = eval_longitudinal(mat.v[3], mat.m_scale[3], wi.sin_theta,
-      wi.cos_theta, lobes.sin_theta[3], lobes.cos_theta[3]);
-  sum += m / (2 * pif) * lobes.a[3];
+}
+
+vec3f eval_hair_scattering(
+    const hair_brdf& brdf, const vec3f& outgoing, const vec3f& incoming) {
+  // hair.pdf eq. 3 is f = sum_p M_p A_p N_p / |cos theta_i|; the tracer
+  // needs f times the cosine, so the sum itself is returned.
+  auto lobes    = hair_lobes{};
+  float products[4];
+  eval_lobe_products(brdf, outgoing, incoming, lobes, products);
+  auto sum = vec3f{0, 0, 0};
+  for (auto p = 0; p < 4; p++) sum += products[p] * lobes.a[p];
   return sum;
 }
 
 float sample_hair_scattering_pdf(
     const hair_brdf& brdf, const vec3f& outgoing, const vec3f& incoming) {
-  auto& mat   = brdf.material;
-  auto  wo    = make_angles(brdf, outgoing);
-  auto  wi    = make_angles(brdf, incoming);
-  auto  lobes = make_lobes(brdf, wo);
-  auto  phi   = relative_phi(wo, wi);
+  // The same lobes as eval, weighted by the lobe choice instead of A_p.
+  auto lobes    = hair_lobes{};
+  float products[4];
+  eval_lobe_products(brdf, outgoing, incoming, lobes, products);
   make_lobe_pdfs(lobes);
-
-  // Same lobes as eval, weighted by the lobe choice instead of A_p.
   auto pdf = 0.0f;
-  for (auto p = 0; p < 3; p++) {
-    if (lobes.a_pdf[p] == 0) continue;
-    auto m = eval_longitudinal(mat.v[p], mat.m_scale[p], wi.sin_theta,
-        wi.cos_theta, lobes.sin_theta[p], lobes.cos_theta[p]);
-    auto n = eval_azimuthal(mat, wrap_angle(phi - lobes.phi_shift[p]));
-    pdf += m * n * lobes.a_pdf[p];
-  }
-  if (lobes.a_pdf[3] != 0) {
-    auto m = eval_longitudinal(mat.v[3], mat.m_scale[3], wi.sin_theta,
-        wi.cos_theta, lobes.sin_theta[3], lobes.cos_theta[3]);
-    pdf += m / (2 * pif) * lobes.a_pdf[3];
-  }
+  for (auto p = 0; p < 4; p++) pdf += products[p] * lobes.a_pdf[p];
   return pdf;
 }
 
