@@ -293,6 +293,13 @@ static void reports_wrong_counts_bad_indices_and_bad_values() {
       {"property float radius\nend_header\n0 0 0 1\n1 1 1 -1\n2 2 2 1\n",
           {"vertex", "index 1", "radius"}},
   };
+  // An element of empty rows takes no data: a huge count must not hang.
+  write_file(dir.file("empty-rows.ply"),
+      ascii_header + "element nothing 18446744073709551615\nend_header\n0 0 0\n1 1 1\n2 2 2\n");
+  auto shape = shape_data{};
+  auto error = std::string{};
+  EXPECT_TRUE(load_shape(dir.file("empty-rows.ply"), shape, error)) << error;
+  EXPECT_EQ(shape.positions.size(), 3u);
   for (auto i = 0; i < (int)cases.size(); i++) {
     auto filename = dir.file("case" + std::to_string(i) + ".ply");
     write_file(filename, ascii_header + cases[i].first);

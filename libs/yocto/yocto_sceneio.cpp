@@ -384,6 +384,8 @@ template <typename OnScalar, typename OnList>
 static bool read_ply_rows(const std::string& filename, ply_cursor& cursor,
     const ply_element& element, OnScalar&& on_scalar, OnList&& on_list,
     std::string& error) {
+  // Rows without properties take no bytes, however many the header claims.
+  if (element.properties.empty()) return true;
   auto has_lists = false;
   for (auto& property : element.properties) has_lists |= property.is_list;
   if (cursor.format != ply_format::ascii && !has_lists) {
