@@ -5,6 +5,7 @@
 #ifndef YOCTO_TEST_SCENEIO_H_
 #define YOCTO_TEST_SCENEIO_H_
 
+#include <gtest/gtest.h>
 #include <unistd.h>
 #include <yocto/yocto_sceneio.h>
 
@@ -56,6 +57,16 @@ inline std::vector<std::string> list_files(const std::string& directory) {
 
 inline bool contains(const std::string& text, const std::string& part) {
   return text.find(part) != std::string::npos;
+}
+
+inline void expect_same_shape(const yocto::shape_data& a, const yocto::shape_data& b) {
+  EXPECT_EQ(a.positions, b.positions);
+  EXPECT_EQ(a.normals, b.normals);
+  EXPECT_EQ(a.texcoords, b.texcoords);
+  EXPECT_EQ(a.radius, b.radius);
+  EXPECT_EQ(a.triangles, b.triangles);
+  EXPECT_EQ(a.lines, b.lines);
+  EXPECT_EQ(a.curves, b.curves);
 }
 
 }  // namespace yocto_test

@@ -167,16 +167,7 @@ void expect_same_scene(const scene_data& a, const scene_data& b) {
     EXPECT_EQ(a.textures[i].pixels, b.textures[i].pixels);
   }
   ASSERT_EQ(a.shapes.size(), b.shapes.size());
-  for (size_t i = 0; i < a.shapes.size(); i++) {
-    auto &sa = a.shapes[i], &sb = b.shapes[i];
-    EXPECT_EQ(sa.positions, sb.positions);
-    EXPECT_EQ(sa.normals, sb.normals);
-    EXPECT_EQ(sa.texcoords, sb.texcoords);
-    EXPECT_EQ(sa.radius, sb.radius);
-    EXPECT_EQ(sa.triangles, sb.triangles);
-    EXPECT_EQ(sa.lines, sb.lines);
-    EXPECT_EQ(sa.curves, sb.curves);
-  }
+  for (size_t i = 0; i < a.shapes.size(); i++) expect_same_shape(a.shapes[i], b.shapes[i]);
   ASSERT_EQ(a.materials.size(), b.materials.size());
   for (size_t i = 0; i < a.materials.size(); i++) {
     auto &ma = a.materials[i], &mb = b.materials[i];

@@ -38,16 +38,6 @@ shape_data make_random_shape(int kind, int num_vertices, int num_elements) {
   return shape;
 }
 
-void expect_same_shape(const shape_data& a, const shape_data& b) {
-  EXPECT_EQ(a.positions, b.positions);
-  EXPECT_EQ(a.normals, b.normals);
-  EXPECT_EQ(a.texcoords, b.texcoords);
-  EXPECT_EQ(a.radius, b.radius);
-  EXPECT_EQ(a.triangles, b.triangles);
-  EXPECT_EQ(a.lines, b.lines);
-  EXPECT_EQ(a.curves, b.curves);
-}
-
 // Appends one value of a PLY type, in ascii or in either byte order.
 void encode(std::string& data, const std::string& type, double value, const std::string& format) {
   if (format == "ascii") {

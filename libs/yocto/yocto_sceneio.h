@@ -105,6 +105,7 @@ bool is_image_filename(const std::string& filename);
 namespace yocto {
 
 // Writes a file through a temporary name in the same directory, then renames.
+// The text is written byte for byte, so binary data works too.
 bool save_text(const std::string& filename, const std::string& text, std::string& error);
 bool load_text(const std::string& filename, std::string& text, std::string& error);
 
