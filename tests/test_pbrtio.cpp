@@ -845,7 +845,8 @@ TEST(pbrtio, include_errors) {
   write_gz(dir / "full.pbrt.gz", text);
   auto size = fs::file_size(dir / "full.pbrt.gz");
   fs::resize_file(dir / "full.pbrt.gz", size / 2);
-  expect_error(dir, "Include \"full.pbrt.gz\"\n", {"full.pbrt.gz", "truncated"});
+  expect_error(dir, "Include \"full.pbrt.gz\"\n",
+      {"scene.pbrt:1:", "Include", "full.pbrt.gz", "truncated"});
   // A gzip whose data is corrupt.
   write_gz(dir / "corrupt.pbrt.gz", text);
   auto stream = std::fstream(dir / "corrupt.pbrt.gz", std::ios::in | std::ios::out | std::ios::binary);

@@ -232,7 +232,8 @@ static bool lex_token(pbrt_lexer& lexer, pbrt_token& token, std::string& error) 
     }
     if (ptr >= end || *ptr != '"') {
       error = lexer.filename + ":" + std::to_string(token.line) +
-              ": unterminated string \"" + std::string{start, (size_t)std::min<ptrdiff_t>(ptr - start, 40)} + "\"";
+              ": unterminated string \"" +
+              std::string{start, (size_t)std::min<ptrdiff_t>(ptr - start, 40)} + "\"";
       return false;
     }
     token.kind = pbrt_token_kind::string;
@@ -993,6 +994,12 @@ static material_data make_hair_material(pbrt_state& state) {
   return material;
 }
 
+// Base colour of a material we approximate: v3's Kd or v4's reflectance.
+static vec3f get_any_color(pbrt_state& state) {
+  auto name = find_param(state, "Kd") ? "Kd" : "reflectance";
+  return get_rgb(state, name, {0.5f, 0.5f, 0.5f});
+}
+
 // Maps a pbrt material to matte, glossy or hair; others to the nearest with a
 // warning.
 static material_data make_pbrt_material(pbrt_state& state, std::string_view type) {
@@ -1018,16 +1025,14 @@ static material_data make_pbrt_material(pbrt_state& state, std::string_view type
         directive_name(state) + ": material \"" + std::string{type} +
             "\" is not supported; approximated by glossy");
     material.type      = material_type::glossy;
-    material.color     = find_param(state, "Kd") ? get_rgb(state, "Kd", {0.5f, 0.5f, 0.5f})
-                                                 : get_rgb(state, "reflectance", {0.5f, 0.5f, 0.5f});
+    material.color     = get_any_color(state);
     material.roughness = get_roughness(state, 0);
     for (auto i = 0; i < state.list.count; i++) state.list.items[i].used = true;
   } else {
     warn_once(state, "material " + std::string{type},
         directive_name(state) + ": material \"" + std::string{type} +
             "\" is not supported; approximated by matte");
-    material.color = find_param(state, "Kd") ? get_rgb(state, "Kd", {0.5f, 0.5f, 0.5f})
-                                             : get_rgb(state, "reflectance", {0.5f, 0.5f, 0.5f});
+    material.color = get_any_color(state);
     for (auto i = 0; i < state.list.count; i++) state.list.items[i].used = true;
   }
   return material;
@@ -1252,7 +1257,8 @@ static bool parse_curve(pbrt_state& state) {
     return false;
   }
   if ((basis != "bezier" && basis != "bspline") || (degree != 2 && degree != 3)) {
-    set_error(state, "unsupported curve basis \"" + basis + "\" of degree " + std::to_string(degree));
+    set_error(state,
+        "unsupported curve basis \"" + basis + "\" of degree " + std::to_string(degree));
     return false;
   }
   // Control points as cubic Bezier segments.
@@ -1762,7 +1768,16 @@ static bool parse_pbrt_file(pbrt_state& state, const std::string& filename, int 
     lexer.ptr = (const char*)mapping.data;
     lexer.end = lexer.ptr + mapping.size;
   } else {
-    if (!read_whole_file(filename, lexer.data, state.error)) return false;
+    auto error = std::string{};
+    if (!read_whole_file(filename, lexer.data, error)) {
+      // Name the including directive too, if any.
+      if (state.lexer) {
+        set_error(state, error);
+      } else {
+        state.error = error;
+      }
+      return false;
+    }
     lexer.ptr = lexer.data.data();
     lexer.end = lexer.data.data() + lexer.data.size();
   }
@@ -1954,7 +1969,8 @@ static bool load_hair_model(const std::string& filename, shape_data& shape,
   for (auto s = (uint64_t)0; s < strands; s++) total += strand_segments(s) + 1;
   if (total != points) {
     error = filename + ": the strands' segments " +
-            std::string{(flags & hair_has_segments) ? "(array at byte 128)" : "(default at byte 16)"} +
+            std::string{(flags & hair_has_segments) ? "(array at byte 128)"
+                                                    : "(default at byte 16)"} +
             " add up to " + std::to_string(total) + " points, the header (byte 8) says " +
             std::to_string(points);
     return false;
@@ -2079,7 +2095,8 @@ bool save_hair_model(const std::string& filename, const shape_data& shape, std::
   auto header     = hair_header{};
   header.num_strands = (uint32_t)segments.size();
   header.num_points  = (uint32_t)vertices.size();
-  header.flags = hair_has_segments | hair_has_points | (has_radius ? (uint32_t)hair_has_thickness : 0u);
+  header.flags       = hair_has_segments | hair_has_points |
+                 (has_radius ? (uint32_t)hair_has_thickness : 0u);
   std::snprintf(header.info, sizeof(header.info), "yocto-hair");
   auto data = std::string((const char*)&header, sizeof(header));
   data.append((const char*)segments.data(), segments.size() * sizeof(uint16_t));
