@@ -372,8 +372,10 @@ static void loads_the_40_layout_and_round_trips_it() {
       (frame3f{{1, 0, 0}, {0, 0, 1}, {0, -1, 0}, {0.5f, 1, -0.5f}}));
   EXPECT_EQ(scene.instances[1].shape, 1);
   EXPECT_EQ(scene.instances[1].material, 1);
-  EXPECT_EQ(scene.instances[3].frame,
-      lookat_frame({-8, 10, 5}, {-6.5f, 3.5f, 0}, {0, 1, 0}));
+  // Objects placed by lookat face their target with +z (cameras with -z).
+  auto light = lookat_frame({-8, 10, 5}, {-6.5f, 3.5f, 0}, {0, 1, 0});
+  EXPECT_EQ(scene.instances[3].frame, (frame3f{-light.x, light.y, -light.z, light.o}));
+  EXPECT_GT(dot(scene.instances[3].frame.z, vec3f{-6.5f, 3.5f, 0} - vec3f{-8, 10, 5}), 0);
 
   expect_round_trip(scene, "layout-40-saved", false);
 }

@@ -1183,9 +1183,13 @@ static bool parse_instance(json_loader& loader, scene_data& scene, const json& e
     auto ok    = true;
     if (key == "name") continue;
     else if (key == "frame") ok = has_frame = read_frame(loader, value, where, instance.frame);
-    else if (key == "lookat")
+    else if (key == "lookat") {
       ok = has_lookat = read_lookat(loader, value, where, instance.frame, distance);
-    else if (key == "shape")
+      // As Yocto/GL: an object placed by lookat points its +z at the target
+      // (a camera points -z), so an area light's front faces what it lights.
+      instance.frame.x = -instance.frame.x;
+      instance.frame.z = -instance.frame.z;
+    } else if (key == "shape")
       ok = read_reference(
           loader, scene, value, where, label, json_reference::shape, instance.shape);
     else if (key == "material")
