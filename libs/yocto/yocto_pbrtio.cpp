@@ -573,37 +573,32 @@ static float get_float(pbrt_state& state, std::string_view name, float value) {
   return value;
 }
 
-static int get_int(pbrt_state& state, std::string_view name, int value) {
+// A parameter with one value of the given type; nullptr if it is absent or
+// wrong (the error is recorded).
+static const pbrt_param* find_single(pbrt_state& state, std::string_view name,
+    std::string_view type, const char* expected) {
   auto param = find_param(state, name);
-  if (!param) return value;
-  if (param->type != "integer") {
-    type_error(state, *param, "an integer");
-  } else if (check_count(state, *param, 1)) {
-    return (int)param->numbers[0];
+  if (!param) return nullptr;
+  if (param->type != type) {
+    type_error(state, *param, expected);
+    return nullptr;
   }
-  return value;
+  return check_count(state, *param, 1) ? param : nullptr;
+}
+
+static int get_int(pbrt_state& state, std::string_view name, int value) {
+  auto param = find_single(state, name, "integer", "an integer");
+  return param ? (int)param->numbers[0] : value;
 }
 
 static bool get_bool(pbrt_state& state, std::string_view name, bool value) {
-  auto param = find_param(state, name);
-  if (!param) return value;
-  if (param->type != "bool") {
-    type_error(state, *param, "a bool");
-  } else if (check_count(state, *param, 1)) {
-    return param->numbers[0] != 0;
-  }
-  return value;
+  auto param = find_single(state, name, "bool", "a bool");
+  return param ? param->numbers[0] != 0 : value;
 }
 
 static std::string get_string(pbrt_state& state, std::string_view name, const std::string& value) {
-  auto param = find_param(state, name);
-  if (!param) return value;
-  if (param->type != "string") {
-    type_error(state, *param, "a string");
-  } else if (check_count(state, *param, 1)) {
-    return param->strings[0];
-  }
-  return value;
+  auto param = find_single(state, name, "string", "a string");
+  return param ? param->strings[0] : value;
 }
 
 // Approximate linear RGB of a blackbody at `temperature` kelvin, normalised
@@ -2107,26 +2102,8 @@ bool save_hair_model(const std::string& filename, const shape_data& shape, std::
       data.append((const char*)&thickness, 4);
     }
   }
-  // Binary write through a temporary name.
-  auto temporary = make_temporary_filename(filename);
-  auto file      = std::fopen(temporary.c_str(), "wb");
-  if (!file) {
-    error = filename + ": cannot create file";
-    return false;
-  }
-  auto written = std::fwrite(data.data(), 1, data.size(), file);
-  auto closed  = std::fclose(file) == 0;
-  if (written != data.size() || !closed) {
-    std::remove(temporary.c_str());
-    error = filename + ": cannot write file";
-    return false;
-  }
-  if (std::rename(temporary.c_str(), filename.c_str()) != 0) {
-    std::remove(temporary.c_str());
-    error = filename + ": cannot write file";
-    return false;
-  }
-  return true;
+  // save_text writes bytes as they are, through a temporary name.
+  return save_text(filename, data, error);
 }
 
 bool load_hair_scene(const std::string& filename, scene_data& scene, std::string& error,
