@@ -296,6 +296,9 @@ TEST(pbrtio, attribute_and_transform_scoping) {
       "AttributeEnd\n"
       "Shape \"sphere\"\n"};  // identity, red, not emissive
   ASSERT_TRUE(load_text(dir, text, scene, error)) << error;
+  // No Film: pbrt's default aspect, resolution left to the renderer.
+  EXPECT_EQ(scene.settings.resolution, 0);
+  EXPECT_FLOAT_EQ(scene.cameras[0].aspect, 640.0f / 480.0f);
   ASSERT_EQ(scene.instances.size(), 3u);
   auto material = [&](int i) { return scene.materials[scene.instances[i].material]; };
   expect_near(scene.instances[0].frame.o, {1, 0, 0});
@@ -785,6 +788,7 @@ TEST(pbrtio, bad_input_names_file_line_and_directive) {
   expect_error(dir, "WorldBegin\nShape \"sphere\" \"integer radius\" 1\n",
       {"scene.pbrt:2:", "\"integer radius\" should be a float"});
   expect_error(dir, "Sampler \"halton\" \"integer pixelsamples\" 1.5\n", {"expected an integer"});
+  expect_error(dir, "Sampler \"halton\" \"integer pixelsamples\" [ 1e9 ]\n", {"at most 2^24"});
   expect_error(dir, "WorldBegin\nShape \"sphere\" \"float radius\" 1e99\n", {"expected a number"});
   expect_error(dir, "WorldBegin\nShape \"sphere\" \"vec5 radius\" 1\n",
       {"unknown parameter type \"vec5\""});

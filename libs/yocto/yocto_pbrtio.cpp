@@ -691,6 +691,11 @@ static void warn_unused_params(pbrt_state& state) {
   }
 }
 
+// Integers are stored as floats, exact up to 2^24.
+static bool is_integer(float value) {
+  return value == std::floor(value) && std::abs(value) <= (float)(1 << 24);
+}
+
 // Parses one value of a parameter into `param`.
 static bool parse_param_value(pbrt_state& state, pbrt_param& param,
     pbrt_value_kind kind, const pbrt_token& token) {
@@ -708,7 +713,7 @@ static bool parse_param_value(pbrt_state& state, pbrt_param& param,
       return bad("a string");
     auto value = 0.0f;
     if (!parse_float(token.text, value)) return bad("a number");
-    if (param.integer && value != std::floor(value)) return bad("an integer");
+    if (param.integer && !is_integer(value)) return bad("an integer (at most 2^24)");
     param.numbers.push_back(value);
     return true;
   }
@@ -785,7 +790,7 @@ static bool parse_params(pbrt_state& state) {
           if (number_end &&
               (number_end == lexer.end ||
                   (pbrt_char_class[(unsigned char)*number_end] & pbrt_delimiter)) &&
-              (!param.integer || value == std::floor(value))) {
+              (!param.integer || is_integer(value))) {
             param.numbers.push_back(value);
             lexer.ptr = number_end;
             continue;
@@ -1821,10 +1826,11 @@ bool load_pbrt_scene(const std::string& filename, scene_data& scene, std::string
     add_warning(state, filename + ": " + std::to_string(state.stack.size()) +
                            " unclosed AttributeBegin/TransformBegin block(s)");
   }
+  // Without a Film directive, pbrt-v3's default 640x480 gives the aspect; the
+  // resolution stays unset for the renderer to choose.
   auto film = state.has_film ? state.film : vec2i{640, 480};
   scene.cameras.push_back(make_pbrt_camera(state.camera, film));
   scene.camera_names.push_back("camera");
-  if (!scene.settings.resolution) scene.settings.resolution = std::max(film.x, film.y);
   if (params.curves_as_lines) {
     for (auto& shape : scene.shapes)
       if (!shape.curves.empty()) shape = curves_to_lines(shape, params.segments);
