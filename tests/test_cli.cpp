@@ -209,3 +209,36 @@ TEST(cli, info_prints_counts) {
   EXPECT_NE(result.output.find("fiber segments: 200"), std::string::npos) << result.output;
   EXPECT_NE(result.output.find("bounds:"), std::string::npos) << result.output;
 }
+
+TEST(cli, convert_bad_input_leaves_nothing) {
+  auto dir = make_test_dir("convert");
+  // A pbrt scene whose include is missing, one with an unterminated string,
+  // and a truncated .hair file.
+  write_file(dir / "missing.pbrt", "WorldBegin\nInclude \"models/nothere.pbrt\"\nWorldEnd\n");
+  write_file(dir / "string.pbrt", "WorldBegin\nMaterial \"hair\n");
+  write_file(dir / "short.hair", std::string("HAIR\x02\x00\x00\x00", 8));
+  auto out = (dir / "out" / "scene.json").string();
+  expect_failure(run("convert " + (dir / "missing.pbrt").string() + " " + out), "nothere.pbrt");
+  expect_failure(run("convert " + (dir / "string.pbrt").string() + " " + out), "string.pbrt");
+  expect_failure(run("convert " + (dir / "short.hair").string() + " " + out), "short.hair");
+  EXPECT_FALSE(fs::exists(dir / "out"));
+}
+
+TEST(cli, convert_generated_hair_round_trips) {
+  auto dir = make_test_dir("roundtrip");
+  for (auto extension : {".pbrt", ".pbrt.gz", ".hair"}) {
+    auto strands = (dir / (std::string("strands") + extension)).string();
+    ASSERT_EQ(run("hair --style curly --strands 30 --segments 6 -o " + strands).status, 0);
+    auto json   = (dir / (std::string("converted") + extension + ".json")).string();
+    auto result = run("convert " + strands + " " + json);
+    ASSERT_EQ(result.status, 0) << result.output;
+    auto scene = scene_data{};
+    auto error = std::string{};
+    ASSERT_TRUE(load_scene(json, scene, error)) << error;
+    auto curves = (size_t)0;
+    for (auto& shape : scene.shapes) curves += shape.curves.size();
+    // pbrt keeps the Bezier segments; .hair keeps the strand points (one
+    // segment per generated segment after the Catmull-Rom fit).
+    EXPECT_EQ(curves, (size_t)30 * 6) << extension;
+  }
+}
