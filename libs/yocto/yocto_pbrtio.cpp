@@ -1334,31 +1334,6 @@ static bool parse_curve(pbrt_state& state) {
   return true;
 }
 
-static shape_data make_sphere_shape(float radius, int steps_phi = 64, int steps_theta = 32) {
-  auto shape = shape_data{};
-  for (auto j = 0; j <= steps_theta; j++) {
-    for (auto i = 0; i <= steps_phi; i++) {
-      auto u = (float)i / steps_phi, v = (float)j / steps_theta;
-      auto phi = 2 * pif * u, theta = pif * v;
-      auto n = vec3f{std::cos(phi) * std::sin(theta), std::sin(phi) * std::sin(theta),
-          std::cos(theta)};
-      shape.positions.push_back(radius * n);
-      shape.normals.push_back(n);
-      shape.texcoords.push_back({u, v});
-    }
-  }
-  auto vid = [&](int i, int j) { return j * (steps_phi + 1) + i; };
-  for (auto j = 0; j < steps_theta; j++) {
-    for (auto i = 0; i < steps_phi; i++) {
-      // Outward-facing; the triangles that collapse at the poles are dropped.
-      if (j != steps_theta - 1)
-        shape.triangles.push_back({vid(i, j), vid(i, j + 1), vid(i + 1, j + 1)});
-      if (j != 0) shape.triangles.push_back({vid(i, j), vid(i + 1, j + 1), vid(i + 1, j)});
-    }
-  }
-  return shape;
-}
-
 static shape_data make_disk_shape(float radius, float inner, float height, int steps = 64) {
   auto shape = shape_data{};
   auto ring  = [&](float r) {
@@ -1458,7 +1433,7 @@ static bool parse_shape(pbrt_state& state) {
       set_error(state, "radius must be positive");
       return false;
     }
-    add_shape_instance(state, make_sphere_shape(radius), "sphere");
+    add_shape_instance(state, make_sphere_shape(64, radius), "sphere");
   } else if (type == "disk") {
     auto radius = get_float(state, "radius", 1);
     auto inner  = get_float(state, "innerradius", 0);
