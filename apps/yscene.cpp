@@ -9,6 +9,7 @@
 #include <chrono>
 #include <csignal>
 #include <cstdio>
+#include <filesystem>
 #include <yocto/yocto_bvh.h>
 #include <yocto/yocto_hairgen.h>
 #include <yocto/yocto_pbrtio.h>
@@ -237,7 +238,60 @@ struct hair_options {
   std::vector<float> sigma_a     = {};
   std::vector<float> color       = {};
   bool               has_melanin = false;
+  std::string        fit_camera   = "";     // scene whose first camera places the strands
+  float              fit_fraction = 0.75f;  // of the image the strands span
+  float              fit_distance = 0;      // 0: where the camera sees them now
 };
+
+// Offset of pbrt's WorldBegin in a scene's text (comments and strings
+// skipped), or npos.
+static size_t find_world_begin(const std::string& text) {
+  for (auto i = (size_t)0; i < text.size(); i++) {
+    if (text[i] == '#') {
+      while (i < text.size() && text[i] != '\n') i++;
+    } else if (text[i] == '"') {
+      i++;
+      while (i < text.size() && text[i] != '"') i++;
+    } else if (text.compare(i, 10, "WorldBegin") == 0 &&
+               (i == 0 || std::isspace((unsigned char)text[i - 1]))) {
+      return i;
+    }
+  }
+  return std::string::npos;
+}
+
+// The first camera of a scene. For a plain .pbrt file only the part before
+// WorldBegin is read (through a temporary copy), so the camera of a scene
+// whose world includes are missing, the stand-ins' use case, still loads.
+static bool load_first_camera(const std::string& filename, camera_data& camera,
+    std::string& error) {
+  auto scene = scene_data{};
+  if (path_extension(filename) == ".pbrt") {
+    auto text = std::string{};
+    if (!load_text(filename, text, error)) return false;
+    auto world = find_world_begin(text);
+    if (world == std::string::npos) return error = filename + ": no WorldBegin", false;
+    auto temporary = make_temporary_filename(
+        (std::filesystem::temp_directory_path() / "yscene-camera.pbrt").string());
+    if (!save_text(temporary, text.substr(0, world) + "WorldBegin\n", error)) return false;
+    auto params   = pbrt_params{};
+    params.lenient = true;
+    auto warnings = std::vector<std::string>{};  // film and sampler details do not matter
+    auto ok       = load_pbrt_scene(temporary, scene, error, params, &warnings);
+    std::remove(temporary.c_str());
+    if (!ok) {
+      // Name the user's file, not the temporary copy.
+      auto at = error.find(temporary);
+      if (at != std::string::npos) error.replace(at, temporary.size(), filename);
+      return false;
+    }
+  } else if (!load_any_scene(filename, scene, error, {})) {
+    return false;
+  }
+  if (scene.cameras.empty()) return error = filename + ": no camera", false;
+  camera = scene.cameras[0];
+  return true;
+}
 
 static int run_hair(const hair_options& options, hair_style_params params,
     hair_material material) {
@@ -258,21 +312,34 @@ static int run_hair(const hair_options& options, hair_style_params params,
   auto is_pbrt   = extension == ".pbrt" ||
                  (output.size() > 8 && output.substr(output.size() - 8) == ".pbrt.gz");
   auto strands   = (size_t)0, segments = (size_t)0;
+  if (!options.fit_camera.empty() && extension == ".json")
+    return print_error("--fit-camera places stand-in strands: use a .pbrt, .pbrt.gz, .hair or .ply output");
   if (extension == ".json") {
     auto scene = make_hair_scene(params, material);
     strands    = (size_t)params.strands;
     segments   = scene.shapes[0].curves.size();
     if (!save_scene(output, scene, error)) return print_error(error);
-  } else if (is_pbrt || extension == ".hair") {
+  } else if (is_pbrt || extension == ".hair" || extension == ".ply") {
     // Strands only: stand-in geometry for scenes that include or load it.
     auto shape = make_hair_strands(params);
     strands    = (size_t)params.strands;
     segments   = shape.curves.size();
-    auto ok    = is_pbrt ? save_pbrt_curves(output, shape, error)
-                         : save_hair_model(output, shape, error);
+    if (!options.fit_camera.empty()) {
+      auto camera = camera_data{};
+      if (!load_first_camera(options.fit_camera, camera, error)) return print_error(error);
+      auto frame = fit_hair_to_camera(camera, shape, options.fit_fraction, options.fit_distance);
+      transform_hair_strands(shape, frame);
+      std::printf("fitted to %s's camera: scale %g, centre [%g %g %g]\n",
+          options.fit_camera.c_str(), frame_scale(frame), center(compute_bounds(shape)).x,
+          center(compute_bounds(shape)).y, center(compute_bounds(shape)).z);
+    }
+    auto ok = is_pbrt ? save_pbrt_curves(output, shape, error)
+              : extension == ".hair" ? save_hair_model(output, shape, error)
+                                     : save_shape(output, shape, error);
     if (!ok) return print_error(error);
   } else {
-    return print_error(output + ": unknown output extension (use .json, .pbrt, .pbrt.gz or .hair)");
+    return print_error(
+        output + ": unknown output extension (use .json, .pbrt, .pbrt.gz, .hair or .ply)");
   }
   std::printf("generated %s: %s hair, %zu strands, %zu Bezier segments in %.2fs\n",
       output.c_str(), options.style.c_str(), strands, segments, seconds_since(start));
@@ -338,8 +405,16 @@ int main(int argc, const char** argv) {
       ->check(CLI::NonNegativeNumber);
   hair->add_option("--seed", hair_params.seed, "random seed");
   hair->add_option("--output,-o", hair_opts.output,
-          "json scene (with ply and sky), .pbrt, .pbrt.gz or .hair strands")
+          "json scene (with ply and sky), .pbrt, .pbrt.gz, .hair or .ply strands")
       ->required();
+  hair->add_option("--fit-camera", hair_opts.fit_camera,
+      "place the strands where this scene's first camera looks (pbrt: read up to WorldBegin)");
+  hair->add_option("--fit-fraction", hair_opts.fit_fraction,
+          "with --fit-camera: fraction of the image the strands span")
+      ->check(CLI::Range(0.01f, 1.0f));
+  hair->add_option("--fit-distance", hair_opts.fit_distance,
+          "with --fit-camera: distance along the view axis (0: where the camera sees them)")
+      ->check(CLI::NonNegativeNumber);
   hair->add_option("--eumelanin", hair_material_params.eumelanin, "eumelanin concentration")
       ->check(CLI::NonNegativeNumber);
   hair->add_option("--pheomelanin", hair_material_params.pheomelanin, "pheomelanin concentration")

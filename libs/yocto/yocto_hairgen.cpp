@@ -6,6 +6,7 @@
 
 #include <zlib.h>
 
+#include <cmath>
 #include <cstdio>
 #include <memory>
 
@@ -319,6 +320,82 @@ bool save_pbrt_curves(const std::string& filename, const shape_data& shape,
     return error = filename + ": cannot write", false;
   }
   return true;
+}
+
+}  // namespace yocto
+
+// -----------------------------------------------------------------------------
+// PLACEMENT FOR A CAMERA
+// -----------------------------------------------------------------------------
+namespace yocto {
+
+frame3f fit_hair_to_camera(const camera_data& camera, const shape_data& strands,
+    float fraction, float distance) {
+  if (strands.positions.empty() || !(fraction > 0) || !std::isfinite(fraction))
+    return identity3x4f;
+  auto centre    = center(compute_bounds(strands));
+  auto to_camera = inverse(camera.frame);
+  if (!(distance > 0)) {
+    // Camera space looks down -z.
+    auto depth = -transform_point(to_camera, centre).z;
+    distance   = depth > 0 ? depth : camera.focus;
+  }
+  // Half the image plane at unit depth, as eval_camera spans it.
+  auto film = camera.aspect >= 1 ? vec2f{camera.film, camera.film / camera.aspect}
+                                 : vec2f{camera.film * camera.aspect, camera.film};
+  auto half = film / (2 * camera.lens);
+  if (!(distance > 0) || !std::isfinite(distance) || !(half.x > 0) || !(half.y > 0) ||
+      !std::isfinite(half.x) || !std::isfinite(half.y))
+    return identity3x4f;
+  auto target = transform_point(camera.frame, {0, 0, -distance});
+
+  // Control points relative to the centre, in camera axes; a scale s puts a
+  // point at (s q.x, s q.y, s q.z - distance), in front while s q.z < distance.
+  auto offsets = std::vector<vec3f>{};
+  offsets.reserve(strands.positions.size());
+  auto nearest = 0.0f;
+  for (auto& p : strands.positions) {
+    offsets.push_back(transform_vector(to_camera, p - centre));
+    nearest = std::max(nearest, offsets.back().z);
+  }
+  // The fraction of the image (the larger of the two axes) the silhouette spans.
+  auto coverage = [&](float s) {
+    auto lo = vec2f{0, 0}, hi = vec2f{0, 0};
+    for (auto& q : offsets) {
+      auto depth = distance - s * q.z;
+      auto uv    = vec2f{s * q.x, s * q.y} / depth;
+      lo         = min(lo, uv);
+      hi         = max(hi, uv);
+    }
+    auto span = (hi - lo) / (2.0f * half);
+    return std::max(span.x, span.y);
+  };
+  // The silhouette grows with the scale: bracket, then bisect. Points may
+  // come at most to a tenth of the distance from the camera.
+  auto limit = nearest > 0 ? 0.9f * distance / nearest : 0.0f;
+  auto lo = 0.0f, hi = limit > 0 ? limit : 1.0f;
+  if (limit <= 0) {
+    for (auto k = 0; k < 64 && coverage(hi) < fraction; k++) hi *= 2;
+  }
+  if (coverage(hi) <= 0) {
+    lo = 1;  // a point or a line along the view axis: nothing to fill with
+  } else if (coverage(hi) <= fraction) {
+    lo = hi;  // the closest the strands may come
+  } else {
+    for (auto k = 0; k < 48; k++) {
+      auto mid = (lo + hi) / 2;
+      if (coverage(mid) < fraction) lo = mid;
+      else hi = mid;
+    }
+  }
+  auto scale = lo > 0 && std::isfinite(lo) ? lo : 1.0f;
+  return {{scale, 0, 0}, {0, scale, 0}, {0, 0, scale}, target - scale * centre};
+}
+
+void transform_hair_strands(shape_data& strands, const frame3f& frame) {
+  for (auto& p : strands.positions) p = transform_point(frame, p);
+  auto scale = frame_scale(frame);
+  for (auto& r : strands.radius) r *= scale;
 }
 
 }  // namespace yocto

@@ -66,4 +66,27 @@ bool save_pbrt_curves(const std::string& filename, const shape_data& shape,
 
 }  // namespace yocto
 
+// -----------------------------------------------------------------------------
+// PLACEMENT FOR A CAMERA
+// -----------------------------------------------------------------------------
+namespace yocto {
+
+// The frame (a uniform scale about the strands' bounding box centre, then a
+// translation) that places strands where a camera looks: the box centre on
+// the view axis at `distance`, scaled so that the silhouette of the control
+// points spans `fraction` of the image along its tighter axis. A distance of
+// 0 takes the depth at which the camera sees the box centre where it is, if
+// that is in front of the camera, else the camera's focus distance. Returns
+// the identity for empty strands or a fraction or camera it cannot fit.
+// Orthographic cameras are treated as perspective ones: stand-ins are for
+// pbrt's and Yocto's perspective hair scenes.
+frame3f fit_hair_to_camera(const camera_data& camera, const shape_data& strands,
+    float fraction, float distance = 0);
+
+// Moves strands by a frame: positions transformed, radii scaled by the
+// frame's scale (so fibers keep their thickness relative to the hair).
+void transform_hair_strands(shape_data& strands, const frame3f& frame);
+
+}  // namespace yocto
+
 #endif
