@@ -55,6 +55,14 @@ static int64_t peak_memory() {
   return (int64_t)usage.ru_maxrss * 1024;
 }
 
+// CPU time of this process (user and system) in seconds.
+static double cpu_seconds() {
+  auto usage = rusage{};
+  getrusage(RUSAGE_SELF, &usage);
+  return usage.ru_utime.tv_sec + usage.ru_utime.tv_usec * 1e-6 + usage.ru_stime.tv_sec +
+         usage.ru_stime.tv_usec * 1e-6;
+}
+
 // Loads a scene by extension: json, pbrt, or a Cem Yuksel .hair model.
 static bool load_any_scene(const std::string& filename, scene_data& scene,
     std::string& error, const pbrt_params& params) {
@@ -82,7 +90,71 @@ struct render_options {
   float       exposure = 0;
   bool        flat_curves = false;
   bool        quiet       = false;
+  // Benchmark variants and measurements.
+  std::string curves      = "native";  // native or lines
+  int         segments    = 4;         // line segments per curve with lines
+  bool        no_flatten  = false;     // Embree instances even for identity frames
+  bool        checkpoints = false;     // save at 1, 2, 4, ... spp
+  double      time_budget = 0;         // stop at the first power of two after it
+  bool        stats       = false;     // one machine-readable line of figures
+  bool        embree_only = false;     // replay the render's rays through Embree
+  std::string bvh_quality = "high";    // Embree build quality
+  std::string embree_config = "";      // Embree device configuration
 };
+
+// OUTPUT with "-NNNNNspp" before the extension.
+static std::string checkpoint_filename(const std::string& output, int samples) {
+  auto extension = path_extension(output);
+  char suffix[32];
+  std::snprintf(suffix, sizeof(suffix), "-%05dspp", samples);
+  return output.substr(0, output.size() - extension.size()) + suffix + extension;
+}
+
+static bool is_power_of_two(int n) { return n > 0 && (n & (n - 1)) == 0; }
+
+// The limit of the renderer's speed: renders the samples (timed), records the
+// same rays again (the render is deterministic) and casts them through Embree
+// alone (timed, median of three). Prints both rates and their ratio.
+static int run_raycast(const render_options& options, const scene_data& scene,
+    const scene_bvh& bvh, const trace_context& context, const trace_params& params) {
+  auto state = trace_state{};
+  init_trace_state(state, scene, params);
+  auto start = std::chrono::steady_clock::now();
+  auto cpu   = cpu_seconds();
+  trace_samples(state, scene, bvh, context, params, params.samples);
+  auto render_time = seconds_since(start), render_cpu = cpu_seconds() - cpu;
+  auto render_rays = (double)state.rays;
+  init_trace_state(state, scene, params);
+  auto rays = record_trace_rays(state, scene, bvh, context, params, params.samples);
+  if ((double)rays.size() != render_rays)
+    return print_error("the recorded rays differ from the rendered ones");
+  auto times = std::vector<double>{}, cpus = std::vector<double>{};
+  auto hits  = (int64_t)0;
+  for (auto run = 0; run < 3; run++) {
+    auto run_start = std::chrono::steady_clock::now();
+    auto run_cpu   = cpu_seconds();
+    hits           = cast_trace_rays(bvh, rays, params.threads);
+    times.push_back(seconds_since(run_start));
+    cpus.push_back(cpu_seconds() - run_cpu);
+  }
+  std::sort(times.begin(), times.end());
+  std::sort(cpus.begin(), cpus.end());
+  std::printf("raycast %s: %zu rays (%.1f%% hit) of %d spp at %dx%d\n", options.scene.c_str(),
+      rays.size(), 100.0 * hits / std::max(rays.size(), (size_t)1), params.samples,
+      state.width, state.height);
+  std::printf("  renderer   %s rays/s (%.3fs, cpu %.3fs)\n",
+      format_count(render_rays / render_time).c_str(), render_time, render_cpu);
+  std::printf("  embree     %s rays/s (%.3fs, cpu %.3fs, median of 3)\n",
+      format_count(rays.size() / times[1]).c_str(), times[1], cpus[1]);
+  std::printf("  renderer / embree: %.3f (by cpu time %.3f)\n",
+      (render_rays / render_time) / (rays.size() / times[1]),
+      (render_rays / render_cpu) / (rays.size() / cpus[1]));
+  if (options.stats)
+    std::printf("stats rays=%zu render_seconds=%.6f render_cpu=%.6f embree_seconds=%.6f "
+                "embree_cpu=%.6f\n",
+        rays.size(), render_time, render_cpu, times[1], cpus[1]);
+  return 0;
+}
 
 static int run_render(const render_options& options, trace_params params,
     const CLI::App& command) {
@@ -93,6 +165,10 @@ static int run_render(const render_options& options, trace_params params,
   auto error = std::string{};
   if (!load_any_scene(options.scene, scene, error, {})) return print_error(error);
   add_missing_camera(scene);
+  if (options.curves == "lines") {
+    for (auto& shape : scene.shapes)
+      if (!shape.curves.empty()) shape = curves_to_lines(shape, options.segments);
+  }
   // Settings carried by the scene file are defaults the command line overrides.
   if (scene.settings.samples > 0 && command.count("--samples") == 0)
     params.samples = scene.settings.samples;
@@ -109,10 +185,18 @@ static int run_render(const render_options& options, trace_params params,
   if (!check_trace_params(scene, params, error)) return print_error(error);
   auto load_time = seconds_since(start);
 
-  auto bvh = scene_bvh{};
-  if (!make_scene_bvh(bvh, scene, {options.flat_curves, false}, error))
+  auto bvh        = scene_bvh{};
+  auto bvh_params_ = bvh_params{};
+  bvh_params_.flat_curves = options.flat_curves;
+  bvh_params_.flatten     = !options.no_flatten;
+  bvh_params_.quality     = (bvh_quality_type)(std::find(bvh_quality_names.begin(),
+                                               bvh_quality_names.end(), options.bvh_quality) -
+                                           bvh_quality_names.begin());
+  bvh_params_.embree_config = options.embree_config;
+  if (!make_scene_bvh(bvh, scene, bvh_params_, error))
     return print_error(options.scene + ": " + error);
   auto context = make_trace_context(scene);
+  if (options.embree_only) return run_raycast(options, scene, bvh, context, params);
   auto state  = trace_state{};
   init_trace_state(state, scene, params);
   if (!options.quiet)
@@ -124,10 +208,26 @@ static int run_render(const render_options& options, trace_params params,
   interrupted         = false;
   auto previous       = std::signal(SIGINT, handle_sigint);
   auto render_start   = std::chrono::steady_clock::now();
+  auto render_cpu     = cpu_seconds();
   auto last_progress  = -1.0;
   while (state.samples < params.samples && !interrupted) {
     trace_samples(state, scene, bvh, context, params, 1);
     auto elapsed = seconds_since(render_start);
+    if (options.checkpoints && is_power_of_two(state.samples)) {
+      // Saving is not rendering: its time is left out of the figures.
+      auto save_start = std::chrono::steady_clock::now();
+      auto filename   = checkpoint_filename(options.output, state.samples);
+      if (!save_image(filename, get_image(state), error, options.exposure))
+        return print_error(error);
+      std::printf("checkpoint spp=%d seconds=%.6f cpu_seconds=%.6f rays=%lld file=%s\n",
+          state.samples, elapsed, cpu_seconds() - render_cpu, (long long)state.rays.load(),
+          filename.c_str());
+      std::fflush(stdout);
+      render_start += std::chrono::steady_clock::now() - save_start;
+    }
+    if (options.time_budget > 0 && elapsed >= options.time_budget &&
+        is_power_of_two(state.samples))
+      break;
     if (!options.quiet && (elapsed - last_progress > 0.25 || state.samples == params.samples)) {
       last_progress = elapsed;
       auto fraction = (double)state.samples / params.samples;
@@ -141,6 +241,7 @@ static int run_render(const render_options& options, trace_params params,
   }
   std::signal(SIGINT, previous);
   auto render_time = seconds_since(render_start);
+  render_cpu       = cpu_seconds() - render_cpu;
   if (!options.quiet) std::fprintf(stderr, "\n");
   if (interrupted)
     std::fprintf(stderr, "interrupted: saving the %d samples per pixel done\n", state.samples);
@@ -156,6 +257,16 @@ static int run_render(const render_options& options, trace_params params,
       format_count(samples / render_time).c_str(),
       format_count((double)state.rays / render_time).c_str(),
       format_count((double)peak_memory()).c_str());
+  if (options.stats) {
+    auto segments = (size_t)0;
+    for (auto& shape : scene.shapes) segments += shape.lines.size() + shape.curves.size();
+    std::printf("stats load_seconds=%.6f bvh_seconds=%.6f bvh_bytes=%lld segments=%zu "
+                "width=%d height=%d spp=%d render_seconds=%.6f render_cpu=%.6f rays=%lld "
+                "peak_memory=%lld\n",
+        load_time, bvh.build_seconds, (long long)bvh.peak_memory, segments, state.width,
+        state.height, state.samples, render_time, render_cpu, (long long)state.rays.load(),
+        (long long)peak_memory());
+  }
   return 0;
 }
 
@@ -375,6 +486,28 @@ int main(int argc, const char** argv) {
   render->add_flag("--hair-four-numbers", params.hair_four_numbers,
       "sample hair with four random numbers instead of demuxing two");
   render->add_flag("--quiet,-q", render_opts.quiet, "no progress output");
+  render->add_option("--curves", render_opts.curves,
+          "native Bezier curves, or line segments tessellated after loading")
+      ->check(CLI::IsMember({"native", "lines"}));
+  render->add_option("--segments", render_opts.segments, "line segments per curve with --curves lines")
+      ->check(CLI::Range(1, 64));
+  render->add_flag("--hair-per-hit", params.hair_per_hit,
+      "compute the hair material terms at every hit (as the thesis), not once per material");
+  render->add_flag("--no-flatten", render_opts.no_flatten,
+      "keep every instance an Embree instance (no single-level BVH for identity frames)");
+  render->add_flag("--checkpoints", render_opts.checkpoints,
+      "also save OUTPUT-NNNNNspp.EXT at 1, 2, 4, ... spp and print a line for each");
+  render->add_option("--time-budget", render_opts.time_budget,
+          "stop at the first power-of-two spp reached after this many seconds")
+      ->check(CLI::NonNegativeNumber);
+  render->add_option("--bvh-quality", render_opts.bvh_quality, "Embree build quality")
+      ->check(CLI::IsMember({"low", "medium", "high"}));
+  render->add_option("--embree-config", render_opts.embree_config,
+      "Embree device configuration (e.g. verbose=2 prints the BVH Embree builds)");
+  render->add_flag("--stats", render_opts.stats, "print a machine-readable line of figures");
+  render->add_flag("--embree-only", render_opts.embree_only,
+      "render, then cast the same rays through Embree alone and compare rays/s "
+      "(no image is written; use few samples: every ray is kept in memory)");
 
   auto info_scene = std::string{};
   auto info       = app.add_subcommand("info", "print scene statistics");

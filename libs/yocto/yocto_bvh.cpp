@@ -107,11 +107,9 @@ static RTCGeometry make_triangle_geometry(RTCDevice device, const shape_data& sh
   return geometry;
 }
 
-static RTCScene make_shape_scene(
+// The geometry of a shape, committed; null for an empty shape.
+static RTCGeometry make_shape_geometry(
     RTCDevice device, const shape_data& shape, const bvh_params& params) {
-  auto scene = rtcNewScene(device);
-  rtcSetSceneFlags(scene, params.compact ? RTC_SCENE_FLAG_COMPACT : RTC_SCENE_FLAG_NONE);
-  rtcSetSceneBuildQuality(scene, RTC_BUILD_QUALITY_HIGH);
   auto geometry = RTCGeometry{nullptr};
   if (!shape.triangles.empty()) {
     geometry = make_triangle_geometry(device, shape);
@@ -124,8 +122,24 @@ static RTCScene make_shape_scene(
         params.flat_curves ? RTC_GEOMETRY_TYPE_FLAT_BEZIER_CURVE
                            : RTC_GEOMETRY_TYPE_ROUND_BEZIER_CURVE);
   }
-  if (geometry) {
-    rtcCommitGeometry(geometry);
+  if (geometry) rtcCommitGeometry(geometry);
+  return geometry;
+}
+
+static void set_scene_quality(RTCScene scene, const bvh_params& params) {
+  rtcSetSceneFlags(scene, params.compact ? RTC_SCENE_FLAG_COMPACT : RTC_SCENE_FLAG_NONE);
+  rtcSetSceneBuildQuality(scene, params.quality == bvh_quality_type::high
+                                     ? RTC_BUILD_QUALITY_HIGH
+                                     : params.quality == bvh_quality_type::medium
+                                           ? RTC_BUILD_QUALITY_MEDIUM
+                                           : RTC_BUILD_QUALITY_LOW);
+}
+
+static RTCScene make_shape_scene(
+    RTCDevice device, const shape_data& shape, const bvh_params& params) {
+  auto scene = rtcNewScene(device);
+  set_scene_quality(scene, params);
+  if (auto geometry = make_shape_geometry(device, shape, params)) {
     rtcAttachGeometryByID(scene, geometry, 0);
     rtcReleaseGeometry(geometry);
   }
@@ -146,7 +160,7 @@ bool make_scene_bvh(scene_bvh& bvh, const scene_data& scene, const bvh_params& p
   auto errors = std::make_shared<embree_errors>();
   bvh         = {};
   bvh.memory  = std::make_shared<std::atomic<int64_t>>(0);
-  auto device = rtcNewDevice(nullptr);
+  auto device = rtcNewDevice(params.embree_config.c_str());
   if (!device) {
     error = "cannot create the Embree device";
     return false;
@@ -158,21 +172,38 @@ bool make_scene_bvh(scene_bvh& bvh, const scene_data& scene, const bvh_params& p
   rtcSetDeviceErrorFunction(device, embree_error_callback, errors.get());
   rtcSetDeviceMemoryMonitorFunction(device, embree_memory_callback, memory.get());
 
+  // Instances whose shape is put in the top-level scene directly: the
+  // identity frame and a shape no other instance uses.
+  auto users = std::vector<int>(scene.shapes.size(), 0);
+  for (auto& instance : scene.instances) users[instance.shape]++;
+  auto is_flat = [&](const instance_data& instance) {
+    return params.flatten && instance.frame == identity3x4f && users[instance.shape] == 1;
+  };
+
   auto release_scene = [device_ref = bvh.device](void* s) { rtcReleaseScene((RTCScene)s); };
-  for (auto& shape : scene.shapes) {
-    bvh.shapes.push_back(
-        std::shared_ptr<void>(make_shape_scene(device, shape, params), release_scene));
+  bvh.shapes.resize(scene.shapes.size());
+  for (auto& instance : scene.instances) {
+    if (is_flat(instance) || bvh.shapes[instance.shape]) continue;
+    bvh.shapes[instance.shape] = std::shared_ptr<void>(
+        make_shape_scene(device, scene.shapes[instance.shape], params), release_scene);
   }
   auto top = rtcNewScene(device);
   bvh.scene = std::shared_ptr<void>(top, release_scene);
-  rtcSetSceneBuildQuality(top, RTC_BUILD_QUALITY_HIGH);
+  set_scene_quality(top, params);
+  // Geometry ids are instance indices, flat or not.
   for (auto i = 0; i < (int)scene.instances.size(); i++) {
     auto& instance = scene.instances[i];
-    auto  geometry = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_INSTANCE);
-    rtcSetGeometryInstancedScene(geometry, (RTCScene)bvh.shapes[instance.shape].get());
-    // frame3f is 12 floats: axes then origin, i.e. a column-major 3x4 matrix.
-    rtcSetGeometryTransform(geometry, 0, RTC_FORMAT_FLOAT3X4_COLUMN_MAJOR, &instance.frame);
-    rtcCommitGeometry(geometry);
+    auto  geometry = RTCGeometry{nullptr};
+    if (is_flat(instance)) {
+      geometry = make_shape_geometry(device, scene.shapes[instance.shape], params);
+      if (!geometry) continue;
+    } else {
+      geometry = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_INSTANCE);
+      rtcSetGeometryInstancedScene(geometry, (RTCScene)bvh.shapes[instance.shape].get());
+      // frame3f is 12 floats: axes then origin, a column-major 3x4 matrix.
+      rtcSetGeometryTransform(geometry, 0, RTC_FORMAT_FLOAT3X4_COLUMN_MAJOR, &instance.frame);
+      rtcCommitGeometry(geometry);
+    }
     rtcAttachGeometryByID(top, geometry, i);
     rtcReleaseGeometry(geometry);
   }
@@ -214,7 +245,10 @@ scene_intersection intersect_scene_bvh(const scene_bvh& bvh, const ray3f& ray) {
   rtcIntersect1((RTCScene)bvh.scene.get(), &context, &rayhit);
   if (rayhit.hit.geomID == RTC_INVALID_GEOMETRY_ID) return {};
   auto intersection     = scene_intersection{};
-  intersection.instance = (int)rayhit.hit.instID[0];
+  // Flat instances are hit as geometry `instance` of the top-level scene.
+  intersection.instance = (int)(rayhit.hit.instID[0] != RTC_INVALID_GEOMETRY_ID
+                                    ? rayhit.hit.instID[0]
+                                    : rayhit.hit.geomID);
   intersection.element  = (int)rayhit.hit.primID;
   intersection.uv       = {rayhit.hit.u, rayhit.hit.v};
   intersection.distance = rayhit.ray.tfar;

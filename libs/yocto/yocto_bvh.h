@@ -1,9 +1,12 @@
 //
 // # Yocto/Bvh: ray queries on Embree
 //
-// One Embree scene per shape (triangles, round linear curves for lines, round
-// cubic Bezier curves for curves, or ray-facing flat curves on request) and a
-// top-level scene of instances. Intersections return the instance, the
+// One Embree geometry per shape (triangles, round linear curves for lines,
+// round cubic Bezier curves for curves, or ray-facing flat curves on request)
+// in a top-level scene. An instance with the identity frame whose shape no
+// other instance uses is put in the top-level scene directly (one traversal
+// level less, the common case of hair scenes); others are Embree instances of
+// a per-shape scene. Intersections return the instance, the
 // element and Embree's parametric coordinates; fiber geometry at a hit (tangent,
 // radius, signed offset h) is computed by `eval_fiber_hit` in yocto_scene.
 //
@@ -11,6 +14,7 @@
 #ifndef YOCTO_BVH_H_
 #define YOCTO_BVH_H_
 
+#include <array>
 #include <atomic>
 #include <memory>
 #include <string>
@@ -23,9 +27,15 @@
 // -----------------------------------------------------------------------------
 namespace yocto {
 
+enum struct bvh_quality_type { low, medium, high };
+inline const auto bvh_quality_names = std::array<std::string, 3>{"low", "medium", "high"};
+
 struct bvh_params {
   bool flat_curves = false;  // ray-facing flat curves instead of round tubes
   bool compact     = false;  // Embree's compact layout: less memory, a bit slower
+  bool flatten     = true;   // identity instances of unshared shapes without instancing
+  bvh_quality_type quality = bvh_quality_type::high;  // Embree's build quality
+  std::string embree_config = "";  // Embree device configuration, e.g. "verbose=2"
 };
 
 // Embree handles are shared pointers so that the struct copies and frees

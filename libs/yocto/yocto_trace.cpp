@@ -21,6 +21,7 @@ namespace yocto {
 struct trace_point {
   vec3f          position = {0, 0, 0};
   vec3f          normal   = {0, 0, 1};  // shading normal, facing the outgoing side
+  vec3f          gnormal  = {0, 0, 1};  // triangles: geometric normal (area-light pdfs)
   vec3f          emission = {0, 0, 0};
   vec3f          color    = {0, 0, 0};
   float          roughness = 0;
@@ -128,6 +129,9 @@ trace_context make_trace_context(const scene_data& scene) {
   auto context = trace_context{};
   for (auto& material : scene.materials)
     context.hair.push_back(make_hair_precomputed(material.hair));
+  context.instance_light.assign(scene.instances.size(), -1);
+  for (auto& environment : scene.environments)
+    context.environment_inverses.push_back(inverse(environment.frame, false));
   for (auto i = 0; i < (int)scene.instances.size(); i++) {
     auto& instance = scene.instances[i];
     auto& material = scene.materials[instance.material];
@@ -143,7 +147,9 @@ trace_context make_trace_context(const scene_data& scene) {
       total += length(cross(p1 - p0, p2 - p0)) / 2;
       light.cdf.push_back(total);
     }
-    if (total > 0) context.lights.push_back(light);
+    if (total <= 0) continue;
+    context.instance_light[i] = (int)context.lights.size();
+    context.lights.push_back(light);
   }
   for (auto i = 0; i < (int)scene.environments.size(); i++) {
     auto& environment = scene.environments[i];
@@ -175,11 +181,11 @@ trace_context make_trace_context(const scene_data& scene) {
 }
 
 // Direction pdf (solid angle) of sampling the environment texture.
-static float environment_texture_pdf(const scene_data& scene, const trace_light& light,
-    const vec3f& direction) {
+static float environment_texture_pdf(const scene_data& scene,
+    const trace_context& context, const trace_light& light, const vec3f& direction) {
   auto& environment = scene.environments[light.environment];
   auto& texture     = scene.textures[environment.emission_tex];
-  auto  local = transform_direction(inverse(environment.frame, false), direction);
+  auto  local = transform_direction(context.environment_inverses[light.environment], direction);
   auto  uv    = direction_to_equirect(local);
   auto  i     = std::clamp((int)(uv.x * texture.width), 0, texture.width - 1);
   auto  j     = std::clamp((int)(uv.y * texture.height), 0, texture.height - 1);
@@ -222,15 +228,26 @@ static vec3f sample_light(const scene_data& scene, const trace_light& light,
 // -----------------------------------------------------------------------------
 namespace yocto {
 
-static vec3f eval_environments(const scene_data& scene, const vec3f& direction) {
+// Environment radiance along a direction, as eval_environment but with the
+// world-to-local frames inverted once per scene instead of once per call.
+static vec3f eval_environment(const scene_data& scene, const trace_context& context,
+    int index, const vec3f& direction) {
+  auto& environment = scene.environments[index];
+  if (environment.emission_tex < 0) return environment.emission;
+  auto local = transform_direction(context.environment_inverses[index], direction);
+  return environment.emission *
+         eval_texture(scene.textures[environment.emission_tex], direction_to_equirect(local));
+}
+static vec3f eval_environments(
+    const scene_data& scene, const trace_context& context, const vec3f& direction) {
   auto radiance = vec3f{0, 0, 0};
-  for (auto& environment : scene.environments)
-    radiance += eval_environment(scene, environment, direction);
+  for (auto i = 0; i < (int)scene.environments.size(); i++)
+    radiance += eval_environment(scene, context, i, direction);
   return radiance;
 }
 
 static trace_point eval_trace_point(const scene_data& scene, const trace_context& context,
-    const scene_intersection& intersection, const ray3f& ray) {
+    const scene_intersection& intersection, const ray3f& ray, const trace_params& params) {
   auto& instance = scene.instances[intersection.instance];
   auto& material = scene.materials[instance.material];
   auto& shape    = scene.shapes[instance.shape];
@@ -247,7 +264,8 @@ static trace_point eval_trace_point(const scene_data& scene, const trace_context
     texcoord       = surface.texcoord;
     // Emission only from the front face; shading from either side.
     if (dot(surface.gnormal, -ray.d) < 0) point.emission = {0, 0, 0};
-    point.normal = dot(surface.normal, -ray.d) >= 0 ? surface.normal : -surface.normal;
+    point.normal  = dot(surface.normal, -ray.d) >= 0 ? surface.normal : -surface.normal;
+    point.gnormal = surface.gnormal;
   } else {
     auto fiber = eval_fiber_point(scene, instance, intersection.element, intersection.uv.x,
         ray, intersection.distance);
@@ -258,7 +276,9 @@ static trace_point eval_trace_point(const scene_data& scene, const trace_context
     point.tangent  = fiber.tangent;
     point.normal   = fiber.normal;
     if (material.type == material_type::hair) {
-      point.hair = eval_hair_brdf(context.hair[instance.material], fiber.h, fiber.frame);
+      point.hair = params.hair_per_hit
+                       ? eval_hair_brdf(material.hair, fiber.h, fiber.frame)
+                       : eval_hair_brdf(context.hair[instance.material], fiber.h, fiber.frame);
     }
   }
   if (material.color_tex >= 0)
@@ -293,13 +313,10 @@ static float power_heuristic(float pdf_a, float pdf_b) {
 // hit an area light (at distance, with cosine at the light) or escaped.
 static float area_light_pdf(const scene_data& scene, const trace_context& context,
     int instance, float distance, float cos_light) {
-  for (auto& light : context.lights) {
-    if (light.instance != instance) continue;
-    if (cos_light <= 0) return 0;
-    auto area = light.cdf.back();
-    return distance * distance / (cos_light * area) / context.lights.size();
-  }
-  return 0;
+  auto index = context.instance_light[instance];
+  if (index < 0 || cos_light <= 0) return 0;
+  auto area = context.lights[index].cdf.back();
+  return distance * distance / (cos_light * area) / context.lights.size();
 }
 static float environment_light_pdf(const scene_data& scene, const trace_context& context,
     const vec3f& direction) {
@@ -307,15 +324,16 @@ static float environment_light_pdf(const scene_data& scene, const trace_context&
   for (auto& light : context.lights) {
     if (light.environment < 0) continue;
     pdf += scene.environments[light.environment].emission_tex >= 0
-               ? environment_texture_pdf(scene, light, direction)
+               ? environment_texture_pdf(scene, context, light, direction)
                : 1 / (4 * pif);
   }
   return pdf / std::max((int)context.lights.size(), 1);
 }
 
-vec3f trace_radiance(const scene_data& scene, const scene_bvh& bvh,
+// The path tracer; when `record` is not null, every ray cast is appended to it.
+static vec3f trace_path(const scene_data& scene, const scene_bvh& bvh,
     const trace_context& context, const ray3f& camera_ray, rng_state& rng,
-    const trace_params& params, int64_t& rays) {
+    const trace_params& params, int64_t& rays, std::vector<trace_ray>* record) {
   auto radiance  = vec3f{0, 0, 0};
   auto weight    = vec3f{1, 1, 1};
   auto ray       = camera_ray;
@@ -324,8 +342,9 @@ vec3f trace_radiance(const scene_data& scene, const scene_bvh& bvh,
   for (auto bounce = 0; bounce < params.bounces; bounce++) {
     auto intersection = intersect_scene_bvh(bvh, ray);
     rays++;
+    if (record) record->push_back({ray, false});
     if (!intersection.hit) {
-      auto emission = eval_environments(scene, ray.d);
+      auto emission = eval_environments(scene, context, ray.d);
       if (emission != vec3f{0, 0, 0}) {
         auto mis = use_mis && bsdf_pdf > 0
                        ? power_heuristic(bsdf_pdf, environment_light_pdf(scene, context, ray.d))
@@ -334,15 +353,13 @@ vec3f trace_radiance(const scene_data& scene, const scene_bvh& bvh,
       }
       break;
     }
-    auto point    = eval_trace_point(scene, context, intersection, ray);
+    auto point    = eval_trace_point(scene, context, intersection, ray, params);
     auto outgoing = -ray.d;
     if (point.emission != vec3f{0, 0, 0}) {
       auto mis = 1.0f;
       if (use_mis && bsdf_pdf > 0) {
-        auto surface = eval_surface_point(scene, scene.instances[intersection.instance],
-            intersection.element, intersection.uv);
         auto light_pdf = area_light_pdf(scene, context, intersection.instance,
-            intersection.distance, std::abs(dot(surface.gnormal, outgoing)));
+            intersection.distance, std::abs(dot(point.gnormal, outgoing)));
         mis = power_heuristic(bsdf_pdf, light_pdf);
       }
       radiance += weight * point.emission * mis;
@@ -365,20 +382,23 @@ vec3f trace_radiance(const scene_data& scene, const scene_bvh& bvh,
         auto delta    = false;
         if (light.instance >= 0) {
           auto hit = intersect_scene_bvh(bvh, shadow);
+          if (record) record->push_back({shadow, false});
           if (hit.hit && hit.instance == light.instance) {
-            auto lpoint = eval_trace_point(scene, context, hit, shadow);
-            auto surface = eval_surface_point(
-                scene, scene.instances[hit.instance], hit.element, hit.uv);
-            emission = lpoint.emission;
+            auto lpoint = eval_trace_point(scene, context, hit, shadow, params);
+            emission    = lpoint.emission;
             pdf = area_light_pdf(scene, context, hit.instance, hit.distance,
-                std::abs(dot(surface.gnormal, incoming)));
+                std::abs(dot(lpoint.gnormal, incoming)));
           }
-        } else if (!intersect_scene_bvh_any(bvh, shadow)) {
-          if (light.environment >= 0) {
-            emission = eval_environment(scene, scene.environments[light.environment], incoming);
+        } else {
+          if (record) record->push_back({shadow, true});
+          if (intersect_scene_bvh_any(bvh, shadow)) {
+            // occluded: no light
+          } else if (light.environment >= 0) {
             auto& environment = scene.environments[light.environment];
-            pdf = (environment.emission_tex >= 0 ? environment_texture_pdf(scene, light, incoming)
-                                                 : 1 / (4 * pif)) / nlights;
+            emission = eval_environment(scene, context, light.environment, incoming);
+            pdf      = (environment.emission_tex >= 0
+                           ? environment_texture_pdf(scene, context, light, incoming)
+                           : 1 / (4 * pif)) / nlights;
           } else {
             emission = scene.distant_lights[light.distant].emission;
             pdf      = 1.0f / nlights;
@@ -419,6 +439,12 @@ vec3f trace_radiance(const scene_data& scene, const scene_bvh& bvh,
   return radiance;
 }
 
+vec3f trace_radiance(const scene_data& scene, const scene_bvh& bvh,
+    const trace_context& context, const ray3f& ray, rng_state& rng,
+    const trace_params& params, int64_t& rays) {
+  return trace_path(scene, bvh, context, ray, rng, params, rays, nullptr);
+}
+
 }  // namespace yocto
 
 // -----------------------------------------------------------------------------
@@ -456,11 +482,32 @@ static rng_state make_pixel_rng(uint64_t seed, int pixel, int sample) {
   return make_rng(hash_uint64(key), (uint64_t)pixel);
 }
 
-void trace_samples(trace_state& state, const scene_data& scene, const scene_bvh& bvh,
-    const trace_context& context, const trace_params& params, int count) {
-  auto& camera = scene.cameras[params.camera];
+// Runs f(begin, end) over [0, size) in chunks on `threads` threads (0 for
+// all), with the floating-point modes Embree asks for set in every thread.
+template <typename Func>
+static void parallel_chunks(int64_t size, int64_t grain, int threads, Func&& func) {
+  auto arena = tbb::task_arena(threads > 0 ? threads : tbb::task_arena::automatic);
+  arena.execute([&] {
+    tbb::parallel_for(tbb::blocked_range<int64_t>(0, size, grain),
+        [&](const tbb::blocked_range<int64_t>& range) {
+          // Flush-to-zero and denormals-are-zero: denormals slow Embree's
+          // curve intersection down.
+          _MM_SET_FLUSH_ZERO_MODE(_MM_FLUSH_ZERO_ON);
+          _MM_SET_DENORMALS_ZERO_MODE(_MM_DENORMALS_ZERO_ON);
+          func(range.begin(), range.end());
+        });
+  });
+}
+
+// Adds `count` samples to every pixel of the image rows; with `records`, the
+// rays of row j go to (*records)[j].
+static void trace_rows(trace_state& state, const scene_data& scene, const scene_bvh& bvh,
+    const trace_context& context, const trace_params& params, int count,
+    std::vector<std::vector<trace_ray>>* records) {
+  auto& camera     = scene.cameras[params.camera];
   auto  render_row = [&](int j) {
     auto rays = (int64_t)0, nonfinite = (int64_t)0;
+    auto record = records ? &(*records)[j] : nullptr;
     for (auto i = 0; i < state.width; i++) {
       auto pixel = j * state.width + i;
       auto sum   = glm::dvec3{0, 0, 0};
@@ -470,7 +517,7 @@ void trace_samples(trace_state& state, const scene_data& scene, const scene_bvh&
         auto luv      = rand2f(rng);
         auto uv       = vec2f{(i + puv.x) / state.width, (j + puv.y) / state.height};
         auto ray      = eval_camera(camera, uv, luv);
-        auto radiance = trace_radiance(scene, bvh, context, ray, rng, params, rays);
+        auto radiance = trace_path(scene, bvh, context, ray, rng, params, rays, record);
         if (!isfinite(radiance)) {
           nonfinite++;
           continue;
@@ -484,19 +531,15 @@ void trace_samples(trace_state& state, const scene_data& scene, const scene_bvh&
     state.rays += rays;
     state.nonfinite += nonfinite;
   };
-  auto threads = params.threads > 0 ? params.threads : tbb::task_arena::automatic;
-  auto arena   = tbb::task_arena(threads);
-  arena.execute([&] {
-    tbb::parallel_for(tbb::blocked_range<int>(0, state.height, 1),
-        [&](const tbb::blocked_range<int>& range) {
-          // Embree asks for flush-to-zero and denormals-are-zero per thread:
-          // denormals slow its curve intersection down.
-          _MM_SET_FLUSH_ZERO_MODE(_MM_FLUSH_ZERO_ON);
-          _MM_SET_DENORMALS_ZERO_MODE(_MM_DENORMALS_ZERO_ON);
-          for (auto j = range.begin(); j < range.end(); j++) render_row(j);
-        });
+  parallel_chunks(state.height, 1, params.threads, [&](int64_t begin, int64_t end) {
+    for (auto j = begin; j < end; j++) render_row((int)j);
   });
   state.samples += count;
+}
+
+void trace_samples(trace_state& state, const scene_data& scene, const scene_bvh& bvh,
+    const trace_context& context, const trace_params& params, int count) {
+  trace_rows(state, scene, bvh, context, params, count, nullptr);
 }
 
 texture_data get_image(const trace_state& state) {
@@ -506,6 +549,42 @@ texture_data get_image(const trace_state& state) {
   for (auto i = 0; i < (int)state.sums.size(); i++)
     image.pixels[i] = vec3f(state.sums[i] * scale);
   return image;
+}
+
+}  // namespace yocto
+
+// -----------------------------------------------------------------------------
+// RAY CASTING ALONE
+// -----------------------------------------------------------------------------
+namespace yocto {
+
+std::vector<trace_ray> record_trace_rays(trace_state& state, const scene_data& scene,
+    const scene_bvh& bvh, const trace_context& context, const trace_params& params,
+    int count) {
+  auto records = std::vector<std::vector<trace_ray>>(state.height);
+  trace_rows(state, scene, bvh, context, params, count, &records);
+  auto size = (size_t)0;
+  for (auto& record : records) size += record.size();
+  auto rays = std::vector<trace_ray>{};
+  rays.reserve(size);
+  for (auto& record : records) rays.insert(rays.end(), record.begin(), record.end());
+  return rays;
+}
+
+int64_t cast_trace_rays(const scene_bvh& bvh, const std::vector<trace_ray>& rays, int threads) {
+  auto hits = std::atomic<int64_t>{0};
+  // Chunks of a few hundred consecutive rays: about one image row of a
+  // render, so that the replay keeps the render's ray coherence.
+  parallel_chunks((int64_t)rays.size(), 256, threads, [&](int64_t begin, int64_t end) {
+    auto count = (int64_t)0;
+    for (auto i = begin; i < end; i++) {
+      auto& ray = rays[i];
+      count += ray.any_hit ? intersect_scene_bvh_any(bvh, ray.ray)
+                           : intersect_scene_bvh(bvh, ray.ray).hit;
+    }
+    hits += count;
+  });
+  return hits;
 }
 
 }  // namespace yocto

@@ -39,6 +39,7 @@ struct trace_params {
   uint64_t           seed       = 961748941;
   int                threads    = 0;     // 0 for all cores
   bool               hair_four_numbers = false;  // 4 independent numbers, no demux
+  bool               hair_per_hit = false;  // material terms at every hit (as the thesis)
 };
 
 }  // namespace yocto
@@ -61,8 +62,10 @@ struct trace_light {
 // What the tracer precomputes once per scene: the lights to sample and the
 // hair terms that depend on the material alone (one per material).
 struct trace_context {
-  std::vector<trace_light>      lights = {};
-  std::vector<hair_precomputed> hair   = {};
+  std::vector<trace_light>      lights         = {};
+  std::vector<hair_precomputed> hair           = {};
+  std::vector<int>              instance_light = {};  // light of an instance, -1 none
+  std::vector<frame3f>          environment_inverses = {};  // world to local
 };
 
 trace_context make_trace_context(const scene_data& scene);
@@ -102,6 +105,31 @@ texture_data get_image(const trace_state& state);
 vec3f trace_radiance(const scene_data& scene, const scene_bvh& bvh,
     const trace_context& context, const ray3f& ray, rng_state& rng,
     const trace_params& params, int64_t& rays);
+
+}  // namespace yocto
+
+// -----------------------------------------------------------------------------
+// RAY CASTING ALONE (the limit of the renderer's speed)
+// -----------------------------------------------------------------------------
+namespace yocto {
+
+// A ray the tracer cast: a closest-hit query (camera, bounce and area-light
+// shadow rays) or an any-hit query (other shadow rays).
+struct trace_ray {
+  ray3f ray    = {};
+  bool  any_hit = false;
+};
+
+// Renders samples state.samples ... + count - 1 as trace_samples does and
+// returns every ray cast, in pixel order (the same list at any thread count).
+std::vector<trace_ray> record_trace_rays(trace_state& state, const scene_data& scene,
+    const scene_bvh& bvh, const trace_context& context, const trace_params& params,
+    int count);
+
+// Casts the rays through the BVH alone, no shading, on `threads` threads (0
+// for all) in chunks of consecutive rays; returns the number of hits.
+int64_t cast_trace_rays(const scene_bvh& bvh, const std::vector<trace_ray>& rays,
+    int threads);
 
 }  // namespace yocto
 
