@@ -100,6 +100,7 @@ struct render_options {
   bool        embree_only = false;     // replay the render's rays through Embree
   std::string bvh_quality = "high";    // Embree build quality
   std::string embree_config = "";      // Embree device configuration
+  bool        bvh_compact   = false;   // Embree's compact BVH
 };
 
 // OUTPUT with "-NNNNNspp" before the extension.
@@ -193,6 +194,7 @@ static int run_render(const render_options& options, trace_params params,
                                                bvh_quality_names.end(), options.bvh_quality) -
                                            bvh_quality_names.begin());
   bvh_params_.embree_config = options.embree_config;
+  bvh_params_.compact       = options.bvh_compact;
   if (!make_scene_bvh(bvh, scene, bvh_params_, error))
     return print_error(options.scene + ": " + error);
   auto context = make_trace_context(scene);
@@ -504,6 +506,8 @@ int main(int argc, const char** argv) {
       ->check(CLI::IsMember({"low", "medium", "high"}));
   render->add_option("--embree-config", render_opts.embree_config,
       "Embree device configuration (e.g. verbose=2 prints the BVH Embree builds)");
+  render->add_flag("--bvh-compact", render_opts.bvh_compact,
+      "Embree's compact BVH layout (less memory, slower)");
   render->add_flag("--stats", render_opts.stats, "print a machine-readable line of figures");
   render->add_flag("--embree-only", render_opts.embree_only,
       "render, then cast the same rays through Embree alone and compare rays/s "

@@ -130,6 +130,7 @@ trace_context make_trace_context(const scene_data& scene) {
   for (auto& material : scene.materials)
     context.hair.push_back(make_hair_precomputed(material.hair));
   context.instance_light.assign(scene.instances.size(), -1);
+  context.environment_light.assign(scene.environments.size(), -1);
   for (auto& environment : scene.environments)
     context.environment_inverses.push_back(inverse(environment.frame, false));
   for (auto i = 0; i < (int)scene.instances.size(); i++) {
@@ -169,6 +170,7 @@ trace_context make_trace_context(const scene_data& scene) {
       }
       if (total <= 0) continue;
     }
+    context.environment_light[i] = (int)context.lights.size();
     context.lights.push_back(light);
   }
   for (auto i = 0; i < (int)scene.distant_lights.size(); i++) {
@@ -180,13 +182,13 @@ trace_context make_trace_context(const scene_data& scene) {
   return context;
 }
 
-// Direction pdf (solid angle) of sampling the environment texture.
-static float environment_texture_pdf(const scene_data& scene,
-    const trace_context& context, const trace_light& light, const vec3f& direction) {
+// Direction pdf (solid angle) of sampling the environment texture, at the
+// texture coordinates of the direction (computed once for the emission and
+// the pdf: the inverse mapping costs an atan2 and an acos).
+static float environment_texture_pdf(
+    const scene_data& scene, const trace_light& light, const vec2f& uv) {
   auto& environment = scene.environments[light.environment];
   auto& texture     = scene.textures[environment.emission_tex];
-  auto  local = transform_direction(context.environment_inverses[light.environment], direction);
-  auto  uv    = direction_to_equirect(local);
   auto  i     = std::clamp((int)(uv.x * texture.width), 0, texture.width - 1);
   auto  j     = std::clamp((int)(uv.y * texture.height), 0, texture.height - 1);
   auto  prob  = sample_discrete_pdf(light.cdf, j * texture.width + i);
@@ -195,25 +197,26 @@ static float environment_texture_pdf(const scene_data& scene,
   return prob * texture.width * texture.height / (2 * pif * pif * sin_theta);
 }
 
-// Samples a direction towards a light from a point; returns the direction and
-// (a zero vector if the light has no area).
+// Samples a direction towards a light from a point; returns the direction (a
+// zero vector if the light has no area). For a textured environment, `uv` is
+// set to the sampled texture coordinates.
 static vec3f sample_light(const scene_data& scene, const trace_light& light,
-    const vec3f& position, float rel, const vec2f& ruv) {
+    const vec3f& position, float rel, const vec2f& ruv, vec2f& uv) {
   if (light.instance >= 0) {
     auto& instance = scene.instances[light.instance];
     auto& shape    = scene.shapes[instance.shape];
     auto  element  = sample_discrete(light.cdf, rel);
-    auto  uv       = sample_triangle(ruv);
+    auto  bary     = sample_triangle(ruv);
     auto  t        = shape.triangles[element];
-    auto  p = (1 - uv.x - uv.y) * shape.positions[t.x] + uv.x * shape.positions[t.y] +
-             uv.y * shape.positions[t.z];
+    auto  p = (1 - bary.x - bary.y) * shape.positions[t.x] + bary.x * shape.positions[t.y] +
+             bary.y * shape.positions[t.z];
     return safe_normalize(transform_point(instance.frame, p) - position);
   } else if (light.environment >= 0) {
     auto& environment = scene.environments[light.environment];
     if (environment.emission_tex < 0) return sample_sphere(ruv);
     auto& texture = scene.textures[environment.emission_tex];
     auto  index   = sample_discrete(light.cdf, rel);
-    auto  uv      = vec2f{((index % texture.width) + ruv.x) / texture.width,
+    uv = vec2f{((index % texture.width) + ruv.x) / texture.width,
         ((index / texture.width) + ruv.y) / texture.height};
     return transform_direction(environment.frame, equirect_to_direction(uv));
   } else {
@@ -228,21 +231,28 @@ static vec3f sample_light(const scene_data& scene, const trace_light& light,
 // -----------------------------------------------------------------------------
 namespace yocto {
 
-// Environment radiance along a direction, as eval_environment but with the
-// world-to-local frames inverted once per scene instead of once per call.
-static vec3f eval_environment(const scene_data& scene, const trace_context& context,
-    int index, const vec3f& direction) {
-  auto& environment = scene.environments[index];
-  if (environment.emission_tex < 0) return environment.emission;
-  auto local = transform_direction(context.environment_inverses[index], direction);
-  return environment.emission *
-         eval_texture(scene.textures[environment.emission_tex], direction_to_equirect(local));
-}
-static vec3f eval_environments(
-    const scene_data& scene, const trace_context& context, const vec3f& direction) {
+// Radiance of the environments along an escaping ray's direction and, if
+// `light_pdf` is not null, the pdf of sampling that direction by light
+// sampling (for MIS). As eval_environment, but with the world-to-local frames
+// inverted once per scene and the texture coordinates computed once for both.
+static vec3f eval_environments(const scene_data& scene, const trace_context& context,
+    const vec3f& direction, float* light_pdf) {
   auto radiance = vec3f{0, 0, 0};
-  for (auto i = 0; i < (int)scene.environments.size(); i++)
-    radiance += eval_environment(scene, context, i, direction);
+  auto pdf      = 0.0f;
+  for (auto i = 0; i < (int)scene.environments.size(); i++) {
+    auto& environment = scene.environments[i];
+    auto  light       = context.environment_light[i];
+    if (environment.emission_tex < 0) {
+      radiance += environment.emission;
+      if (light >= 0) pdf += 1 / (4 * pif);
+      continue;
+    }
+    auto local = transform_direction(context.environment_inverses[i], direction);
+    auto uv    = direction_to_equirect(local);
+    radiance += environment.emission * eval_texture(scene.textures[environment.emission_tex], uv);
+    if (light >= 0 && light_pdf) pdf += environment_texture_pdf(scene, context.lights[light], uv);
+  }
+  if (light_pdf) *light_pdf = pdf / std::max((int)context.lights.size(), 1);
   return radiance;
 }
 
@@ -318,17 +328,6 @@ static float area_light_pdf(const scene_data& scene, const trace_context& contex
   auto area = context.lights[index].cdf.back();
   return distance * distance / (cos_light * area) / context.lights.size();
 }
-static float environment_light_pdf(const scene_data& scene, const trace_context& context,
-    const vec3f& direction) {
-  auto pdf = 0.0f;
-  for (auto& light : context.lights) {
-    if (light.environment < 0) continue;
-    pdf += scene.environments[light.environment].emission_tex >= 0
-               ? environment_texture_pdf(scene, context, light, direction)
-               : 1 / (4 * pif);
-  }
-  return pdf / std::max((int)context.lights.size(), 1);
-}
 
 // The path tracer; when `record` is not null, every ray cast is appended to it.
 static vec3f trace_path(const scene_data& scene, const scene_bvh& bvh,
@@ -344,11 +343,12 @@ static vec3f trace_path(const scene_data& scene, const scene_bvh& bvh,
     rays++;
     if (record) record->push_back({ray, false});
     if (!intersection.hit) {
-      auto emission = eval_environments(scene, context, ray.d);
+      auto mis_needed = use_mis && bsdf_pdf > 0;
+      auto light_pdf  = 0.0f;
+      auto emission   = eval_environments(
+          scene, context, ray.d, mis_needed ? &light_pdf : nullptr);
       if (emission != vec3f{0, 0, 0}) {
-        auto mis = use_mis && bsdf_pdf > 0
-                       ? power_heuristic(bsdf_pdf, environment_light_pdf(scene, context, ray.d))
-                       : 1.0f;
+        auto mis = mis_needed ? power_heuristic(bsdf_pdf, light_pdf) : 1.0f;
         radiance += weight * emission * mis;
       }
       break;
@@ -372,7 +372,8 @@ static vec3f trace_path(const scene_data& scene, const scene_bvh& bvh,
       auto& light    = context.lights[std::min(rand1i(rng, nlights), nlights - 1)];
       auto  rel      = rand1f(rng);
       auto  ruv      = rand2f(rng);
-      auto  incoming = sample_light(scene, light, point.position, rel, ruv);
+      auto  light_uv = vec2f{0, 0};
+      auto  incoming = sample_light(scene, light, point.position, rel, ruv, light_uv);
       auto  bsdfcos  = incoming == vec3f{0, 0, 0} ? vec3f{0, 0, 0}
                                                  : eval_bsdfcos(point, outgoing, incoming);
       if (bsdfcos != vec3f{0, 0, 0}) {
@@ -394,11 +395,16 @@ static vec3f trace_path(const scene_data& scene, const scene_bvh& bvh,
           if (intersect_scene_bvh_any(bvh, shadow)) {
             // occluded: no light
           } else if (light.environment >= 0) {
+            // The sampled texture coordinates give emission and pdf directly.
             auto& environment = scene.environments[light.environment];
-            emission = eval_environment(scene, context, light.environment, incoming);
-            pdf      = (environment.emission_tex >= 0
-                           ? environment_texture_pdf(scene, context, light, incoming)
-                           : 1 / (4 * pif)) / nlights;
+            if (environment.emission_tex >= 0) {
+              emission = environment.emission *
+                         eval_texture(scene.textures[environment.emission_tex], light_uv);
+              pdf = environment_texture_pdf(scene, light, light_uv) / nlights;
+            } else {
+              emission = environment.emission;
+              pdf      = 1 / (4 * pif) / nlights;
+            }
           } else {
             emission = scene.distant_lights[light.distant].emission;
             pdf      = 1.0f / nlights;

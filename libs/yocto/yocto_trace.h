@@ -64,7 +64,8 @@ struct trace_light {
 struct trace_context {
   std::vector<trace_light>      lights         = {};
   std::vector<hair_precomputed> hair           = {};
-  std::vector<int>              instance_light = {};  // light of an instance, -1 none
+  std::vector<int>              instance_light       = {};  // light of an instance, -1 none
+  std::vector<int>              environment_light    = {};  // light of an environment, -1 none
   std::vector<frame3f>          environment_inverses = {};  // world to local
 };
 
