@@ -43,14 +43,14 @@ def style_of(name):
     return None
 
 
-def fit_arguments(scene, style):
+def fit_arguments(scene, style, v4):
     """Placement of pbrt head stand-ins (see tests/test_realscenes.cpp): hair
     centred 25 units ahead of the camera (the v4 scenes' head sphere), filling
     0.70 (straight) or 0.80 (curly) of pbrt-v3's views as pbrt's renders
     show, 0.90 of v4's narrower views to keep the head sphere covered."""
     if style not in ("straight", "curly"):
         return []
-    fraction = 0.90 if "pbrt-v4" in scene else (0.70 if style == "straight" else 0.80)
+    fraction = 0.90 if v4 else (0.70 if style == "straight" else 0.80)
     return ["--fit-camera", scene, "--fit-distance", "25", "--fit-fraction", str(fraction)]
 
 
@@ -136,7 +136,7 @@ def measure(yscene, source, work, args):
                 continue
             style = style_of(include)
             os.makedirs(os.path.dirname(path), exist_ok=True)
-            count, curves = generate(yscene, style, path, fit_arguments(scene, style))
+            count, curves = generate(yscene, style, path, fit_arguments(scene, style, "pbrt-v4" in source))
             strands, segments = strands + count, segments + curves
             stand_ins.append(style)
         converted = os.path.join(folder, "converted", "scene.json")

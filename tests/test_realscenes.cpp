@@ -125,16 +125,15 @@ static std::vector<std::string> pbrt_includes(const std::string& text) {
 // measured on pbrt-v3's renders (straight 0.70, curly 0.80 of the image);
 // v4's 32 degree views need 0.90 to keep the head sphere inside the
 // stand-in's hair, whose strands are longer than the real bob.
-static std::string pbrt_fit_arguments(const fs::path& scene, hair_style style) {
+static std::string pbrt_fit_arguments(const fs::path& scene, hair_style style, bool v4) {
   if (style != hair_style::straight && style != hair_style::curly) return "";
-  auto v4       = scene.string().find("pbrt-v4") != std::string::npos;
   auto fraction = v4 ? 0.90f : (style == hair_style::straight ? 0.70f : 0.80f);
   return " --fit-camera " + quoted(scene) + " --fit-distance 25 --fit-fraction " +
          std::to_string(fraction);
 }
 
 // Writes stand-ins at a pbrt scene's missing includes through `yscene hair`.
-static void write_pbrt_stand_ins(const fs::path& scene) {
+static void write_pbrt_stand_ins(const fs::path& scene, bool v4) {
   auto text  = std::string{};
   auto error = std::string{};
   ASSERT_TRUE(load_text(scene.string(), text, error)) << error;
@@ -147,7 +146,7 @@ static void write_pbrt_stand_ins(const fs::path& scene) {
     auto output = std::string{};
     ASSERT_TRUE(run_yscene("hair --style " + hair_style_names[(int)style] + " --strands " +
                                std::to_string(stand_in_strands(style)) + " --output " +
-                               quoted(path) + pbrt_fit_arguments(scene, style),
+                               quoted(path) + pbrt_fit_arguments(scene, style, v4),
         output))
         << output;
     ASSERT_TRUE(fs::exists(path)) << output;
@@ -308,12 +307,22 @@ static silhouette fiber_silhouette(const scene_data& scene) {
   return result;
 }
 
+// Image coordinates (u right, v down, in [0,1]) of a world point.
+static vec2f project(const camera_data& camera, const vec3f& point) {
+  auto local = transform_point(inverse(camera.frame), point);
+  auto film  = camera.aspect >= 1 ? vec2f{camera.film, camera.film / camera.aspect}
+                                  : vec2f{camera.film * camera.aspect, camera.film};
+  auto x = local.x / -local.z * camera.lens, y = local.y / -local.z * camera.lens;
+  return {0.5f + x / film.x, 0.5f - y / film.y};
+}
+
 // Copies, writes stand-ins, converts (pbrt) and loads a real scene file.
 static void prepare_scene(const fs::path& source, const scene_copy& copy, scene_data& scene) {
   auto file = copy.path / source.filename();
   auto json = file;
   if (source.extension() == ".pbrt") {
-    write_pbrt_stand_ins(file);
+    // The copy's path no longer tells the pbrt version: the source's does.
+    write_pbrt_stand_ins(file, source.string().find("pbrt-v4") != std::string::npos);
     if (::testing::Test::HasFatalFailure()) return;
     json        = copy.path / "converted" / (source.stem().string() + ".json");
     fs::create_directories(json.parent_path());
@@ -409,6 +418,24 @@ static void check_real_scene(const fs::path& source) {
   if (::testing::Test::HasFatalFailure()) return;
   auto fibers = fiber_silhouette(scene);
   EXPECT_GT(fibers.coverage, 0.05f) << "the camera sees little of the stand-in hair";
+  if (source.string().find("pbrt-v4") != std::string::npos) {
+    // The dark head sphere of the v4 scenes is inside the hair: its top and
+    // sides (as seen) are within the hair's silhouette.
+    auto& camera = scene.cameras[0];
+    for (auto& instance : scene.instances) {
+      auto& shape = scene.shapes[instance.shape];
+      if (is_fiber(shape)) continue;
+      auto bounds = compute_bounds(shape);
+      auto radius = size(bounds).x / 2 * frame_scale(instance.frame);
+      auto centre = transform_point(instance.frame, center(bounds));
+      auto top    = project(camera, centre + camera.frame.y * radius);
+      auto left   = project(camera, centre - camera.frame.x * radius);
+      auto right  = project(camera, centre + camera.frame.x * radius);
+      EXPECT_LT(fibers.box.y, top.y) << "the head sphere shows above the hair";
+      EXPECT_LT(fibers.box.x, left.x) << "the head sphere shows left of the hair";
+      EXPECT_GT(fibers.box.z, right.x) << "the head sphere shows right of the hair";
+    }
+  }
   expect_valid_image(render_scene(scene, 4, 64));
 }
 
