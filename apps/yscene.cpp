@@ -387,17 +387,19 @@ static bool load_first_camera(const std::string& filename, camera_data& camera,
     auto temporary = make_temporary_filename(
         (std::filesystem::temp_directory_path() / "yscene-camera.pbrt").string());
     if (!save_text(temporary, text.substr(0, world) + "WorldBegin\n", error)) return false;
-    auto params   = pbrt_params{};
-    params.lenient = true;
-    auto warnings = std::vector<std::string>{};  // film and sampler details do not matter
-    auto ok       = load_pbrt_scene(temporary, scene, error, params, &warnings);
+    auto warnings = std::vector<std::string>{};
+    auto ok       = load_pbrt_scene(temporary, scene, error, pbrt_params{}, &warnings);
     std::remove(temporary.c_str());
-    if (!ok) {
-      // Name the user's file, not the temporary copy.
-      auto at = error.find(temporary);
-      if (at != std::string::npos) error.replace(at, temporary.size(), filename);
-      return false;
-    }
+    // Messages name the user's file, not the temporary copy; warnings (e.g.
+    // an unsupported camera type) go to stderr, as convert's do.
+    auto rename = [&](std::string message) {
+      auto at = message.find(temporary);
+      if (at != std::string::npos) message.replace(at, temporary.size(), filename);
+      return message;
+    };
+    for (auto& warning : warnings)
+      std::fprintf(stderr, "warning: %s\n", rename(warning).c_str());
+    if (!ok) return error = rename(error), false;
   } else if (!load_any_scene(filename, scene, error, {})) {
     return false;
   }
