@@ -321,6 +321,19 @@ def measure_pow(config):
 # -----------------------------------------------------------------------------
 
 
+def read_csv(filename):
+    """Rows of a CSV written by write_csv, numbers converted back."""
+    def convert(value):
+        for kind in (int, float):
+            try:
+                return kind(value)
+            except ValueError:
+                pass
+        return value
+    with open(filename, newline="") as f:
+        return [{k: convert(v) for k, v in row.items()} for row in csv.DictReader(f)]
+
+
 def write_csv(filename, rows):
     with open(filename, "w", newline="") as f:
         writer = csv.DictWriter(f, fieldnames=list(rows[0].keys()))
@@ -409,22 +422,27 @@ def write_report(out, config, results, limits, scales, pows, plots, command):
                 f"{last['load']:.1f} |")
         lines.append("")
     lines += ["## Summary per scene", "",
-              "Best variant = the shortest time to the fixed RMSE (`~`: extrapolated by MSE ~ "
-              "1/t). Scaling = samples/s of `path-2t` (wall time) over `path` (one thread, "
+              "Best variant = the one-thread variant with the shortest time to the fixed RMSE "
+              "(`~`: extrapolated by MSE ~ 1/t); `path` and `path-2t` are given beside it. "
+              "Scaling = samples/s of `path-2t` (wall time) over `path` (one thread, "
               "CPU time): the speed-up over one uncontended core, which other jobs on the "
               "machine lower (see the load column). "
               "Renderer/Embree = the renderer's rays/s over Embree's rays/s casting the same "
               "rays without shading (one thread, CPU time, median of "
               f"{config['repeats']}). Bytes per segment = Embree's memory over the fiber "
               "segments (native curves).", "",
-              "| scene | fixed RMSE | best variant | its time (s) | renderer / Embree | "
-              "2-thread scaling | bytes per segment |", "|---|---:|---|---:|---:|---:|---:|"]
+              "| scene | fixed RMSE | best variant | its time (s) | `path` (s) | `path-2t` (s) | "
+              "renderer / Embree | 2-thread scaling | bytes per segment |",
+              "|---|---:|---|---:|---:|---:|---:|---:|---:|"]
     for name, data in results.items():
         rows = data["rows"]
-        best = None
+        best, times = None, {}
         for variant in dict.fromkeys(r["variant"] for r in rows):
             vrows = [r for r in rows if r["variant"] == variant]
             seconds, extrapolated = time_to_error(vrows, data["target"])
+            times[variant] = ("~" if extrapolated else "") + fmt(seconds)
+            if vrows[0]["threads"] != 1:
+                continue
             if seconds is not None and (best is None or seconds < best[1]):
                 best = (variant, seconds, extrapolated)
         one = [r for r in rows if r["variant"] == "path"][-1]
@@ -434,6 +452,7 @@ def write_report(out, config, results, limits, scales, pows, plots, command):
         lines.append(
             f"| {name} | {data['target']:.4g} | {best[0] if best else '–'} | "
             f"{(('~' if best[2] else '') + fmt(best[1])) if best else '–'} | "
+            f"{times.get('path', '–')} | {times.get('path-2t', '–')} | "
             f"{fmt(limit['ratio'] if limit else None, 2)} | {fmt(scaling, 2)} | "
             f"{one['bvh_bytes'] / data['segments']:.0f} |")
     lines += ["", "## The limit: Embree alone", "",
@@ -468,6 +487,8 @@ def write_report(out, config, results, limits, scales, pows, plots, command):
                   "layout) pays them at every hit.", "",
                   "| benchmark | ns per call |", "|---|---:|"]
         for r in pows:
+            if "agreement" in r["benchmark"]:
+                continue  # a correctness check, not a timing
             lines.append(f"| {r['benchmark']} | {r['ns']:.2f} |")
     lines.append("")
     with open(os.path.join(out, "README.md"), "w") as f:
@@ -479,6 +500,30 @@ def write_report(out, config, results, limits, scales, pows, plots, command):
 # -----------------------------------------------------------------------------
 
 
+def report_only(out, config, command):
+    """The report and plots again from the CSVs (and cached reference data)."""
+    all_rows = read_csv(os.path.join(out, "results.csv"))
+    limits = {r["scene"]: r for r in read_csv(os.path.join(out, "limit.csv"))}
+    scales = read_csv(os.path.join(out, "scale.csv"))
+    pow_file = os.path.join(out, "pow.csv")
+    pows = read_csv(pow_file) if os.path.exists(pow_file) else measure_pow(config)
+    if pows and not os.path.exists(pow_file):
+        write_csv(pow_file, pows)
+    results, plots = {}, {}
+    for name in dict.fromkeys(r["scene"] for r in all_rows):
+        rows = [r for r in all_rows if r["scene"] == name]
+        stem = f"{name}-r{config['resolution']}-{reference_spp(name, config)}spp.json"
+        with open(os.path.join(ROOT, "out/bench/references", stem)) as f:
+            ref_meta = json.load(f)
+        path_rows = [r for r in rows if r["variant"] == "path"]
+        at = [r for r in path_rows if r["spp"] <= config["target_spp"]]
+        target = (at or path_rows)[-1]["rmse"]
+        results[name] = {"rows": rows, "target": target, "reference": ref_meta,
+                         "segments": int(ref_meta["segments"])}
+        plots[name] = plot(out, name, rows, target)
+    write_report(out, config, results, limits, scales, pows, plots, command)
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--quick", action="store_true",
@@ -486,6 +531,8 @@ def main():
     parser.add_argument("--build", default="build", help="build directory (default build)")
     parser.add_argument("--out", default="docs/benchmark", help="report directory")
     parser.add_argument("--scenes", nargs="*", help="only these scenes")
+    parser.add_argument("--report-only", action="store_true",
+                        help="rewrite the report and plots from the CSVs of the last run")
     args = parser.parse_args()
     yscene = os.path.join(ROOT, args.build, "apps", "yscene")
     if not os.path.exists(yscene):
@@ -504,6 +551,9 @@ def main():
     command = "python3 scripts/bench/run_bench.py" + (" --quick" if args.quick else "")
     start = time.time()
 
+    if args.report_only:
+        report_only(out, config, command)
+        return
     make_scenes(yscene)
     scenes = SCENES[: config["scenes"]]
     if args.scenes:
@@ -531,6 +581,8 @@ def main():
     write_csv(os.path.join(out, "results.csv"), all_rows)
     write_csv(os.path.join(out, "limit.csv"), list(limits.values()))
     write_csv(os.path.join(out, "scale.csv"), scales)
+    if pows:
+        write_csv(os.path.join(out, "pow.csv"), pows)
     write_report(out, config, results, limits, scales, pows, plots, command)
     log(f"done in {time.time() - start:.0f}s: {os.path.relpath(out, ROOT)}/README.md")
 
