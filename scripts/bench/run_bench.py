@@ -548,7 +548,7 @@ def main():
     config["build"] = args.build
     out = os.path.join(ROOT, args.out)
     os.makedirs(out, exist_ok=True)
-    command = "python3 scripts/bench/run_bench.py" + (" --quick" if args.quick else "")
+    command = "bash scripts/bench/run.sh" + (" --quick" if args.quick else "")
     start = time.time()
 
     if args.report_only:
