@@ -1,6 +1,7 @@
 #!/usr/bin/env python3
 """Measures every real scene file in ../shared/data with generated stand-in
-geometry and prints the markdown of docs/results_realscenes.md.
+geometry and prints the markdown of the "Real scene files" section of
+docs/RESULTS.md (or, with --update FILE, replaces that section in FILE).
 
 For each pbrt scene (pbrt-v3 and pbrt-v4) and each Yocto json scene: copies
 its folder to a temporary directory, writes stand-ins at the missing include
@@ -12,10 +13,12 @@ Then runs the realscenes native-vs-lines test and copies its figures.
 Python 3 standard library only; needs a build with yscene and test_realscenes.
 
     scripts/realscenes_table.py [--build build] [--samples 16] [--resolution 256]
-        [--images DIR] > docs/results_realscenes.md
+        [--images DIR] [--update docs/RESULTS.md]
 """
 
 import argparse
+import contextlib
+import io
 import json
 import os
 import platform
@@ -181,7 +184,36 @@ def main():
     parser.add_argument("--images", default="", help="keep the renders as PNGs here")
     parser.add_argument("--sheet", default="",
                         help="with --images: a contact sheet of the renders (needs oiiotool)")
+    parser.add_argument("--update", default="",
+                        help="replace the section '## Real scene files' of this markdown file")
     args = parser.parse_args()
+    if args.update:
+        # Print into a buffer, then put it in place of the old section.
+        buffer = io.StringIO()
+        with contextlib.redirect_stdout(buffer):
+            report(args)
+        replace_section(args.update, "## Real scene files", buffer.getvalue())
+    else:
+        report(args)
+
+
+def replace_section(path, heading, text):
+    """Replaces the markdown section starting at heading (up to the next
+    heading of the same level) with text; written to a temporary file, then
+    renamed."""
+    with open(path) as f:
+        lines = f.read().split("\n")
+    start = lines.index(heading)
+    end = next((i for i in range(start + 1, len(lines)) if lines[i].startswith("## ")),
+               len(lines))
+    updated = "\n".join(lines[:start]) + "\n" + text.rstrip("\n") + "\n\n" + \
+        "\n".join(lines[end:])
+    with open(path + ".tmp", "w") as f:
+        f.write(updated)
+    os.replace(path + ".tmp", path)
+
+
+def report(args):
     yscene = os.path.join(args.build, "apps", "yscene")
     if not os.path.isdir(DATA):
         sys.exit(DATA + " is absent: no real scene files")
@@ -265,8 +297,8 @@ def main():
         print(line)
     print("```\n")
     print("Regenerate (about 3 minutes on 2 cores): `scripts/realscenes_table.py --samples %d "
-          "--resolution %d --images /tmp/realscenes --sheet docs/figures/realscenes.png > "
-          "docs/results_realscenes.md`." % (args.samples, args.resolution))
+          "--resolution %d --images /tmp/realscenes --sheet docs/figures/realscenes.png "
+          "--update docs/RESULTS.md`." % (args.samples, args.resolution))
 
 
 if __name__ == "__main__":

@@ -1,8 +1,9 @@
 //
 // Micro-benchmarks of the hair model: ns per call of eval_hair_brdf,
-// eval_hair_scattering, sample_hair_scattering and sample_hair_scattering_pdf
-// over a fixed set of 1024 random configurations (materials from glassy to
-// rough, absorbing and not, random h, frames and directions; fixed seed).
+// eval_hair_scattering, sample_hair_scattering, sample_hair_scattering_pdf,
+// eval_hair_scattering_and_pdf and the hair work of one bounce, over a fixed
+// set of 1024 random configurations (materials from glassy to rough,
+// absorbing and not, random h, frames and directions; fixed seed).
 // Run: bench_hair --benchmark_repetitions=5 --benchmark_report_aggregates_only=true
 //
 
@@ -89,6 +90,54 @@ static void bench_sample_hair_scattering_pdf(benchmark::State& state) {
   }
 }
 BENCHMARK(bench_sample_hair_scattering_pdf);
+
+static void bench_eval_hair_scattering_and_pdf(benchmark::State& state) {
+  auto& configs = get_configs();
+  auto  i       = 0;
+  for (auto _ : state) {
+    auto& config = configs[i++ & 1023];
+    benchmark::DoNotOptimize(
+        eval_hair_scattering_and_pdf(config.brdf, config.outgoing, config.incoming));
+  }
+}
+BENCHMARK(bench_eval_hair_scattering_and_pdf);
+
+// The hair work of one path-tracer bounce: the per-hit brdf, a light sample's
+// eval and pdf, a BSDF sample and its eval and pdf. First with separate calls
+// and a brdf that knows nothing of the outgoing direction, then as the
+// renderer does it: the brdf made for the outgoing direction and the combined
+// eval and pdf.
+static void bench_hair_bounce_separate_calls(benchmark::State& state) {
+  auto& configs = get_configs();
+  auto  i       = 0;
+  for (auto _ : state) {
+    auto& config = configs[i++ & 1023];
+    auto  brdf   = eval_hair_brdf(config.material, config.h, config.frame);
+    auto  f      = eval_hair_scattering(brdf, config.outgoing, config.incoming);
+    auto  pdf    = sample_hair_scattering_pdf(brdf, config.outgoing, config.incoming);
+    auto  wi     = sample_hair_scattering(brdf, config.outgoing, config.rn);
+    f += eval_hair_scattering(brdf, config.outgoing, wi);
+    pdf += sample_hair_scattering_pdf(brdf, config.outgoing, wi);
+    benchmark::DoNotOptimize(f);
+    benchmark::DoNotOptimize(pdf);
+  }
+}
+BENCHMARK(bench_hair_bounce_separate_calls);
+
+static void bench_hair_bounce_cached_and_combined(benchmark::State& state) {
+  auto& configs = get_configs();
+  auto  i       = 0;
+  for (auto _ : state) {
+    auto& config = configs[i++ & 1023];
+    auto brdf = eval_hair_brdf(config.material, config.h, config.frame, config.outgoing);
+    auto [f, pdf] = eval_hair_scattering_and_pdf(brdf, config.outgoing, config.incoming);
+    auto wi       = sample_hair_scattering(brdf, config.outgoing, config.rn);
+    auto [f2, pdf2] = eval_hair_scattering_and_pdf(brdf, config.outgoing, wi);
+    benchmark::DoNotOptimize(f + f2);
+    benchmark::DoNotOptimize(pdf + pdf2);
+  }
+}
+BENCHMARK(bench_hair_bounce_cached_and_combined);
 
 // The per-material work, which the renderer caches (for reference).
 static void bench_make_hair_precomputed(benchmark::State& state) {

@@ -96,6 +96,24 @@ static float sample_bsdfcos_pdf(
          (1 - specular) * cos_i / pif;
 }
 
+// eval_bsdfcos and sample_bsdfcos_pdf together, for MIS; hair computes the
+// lobe products they share once.
+static std::pair<vec3f, float> eval_bsdfcos_and_pdf(
+    const trace_point& point, const vec3f& outgoing, const vec3f& incoming) {
+  if (point.type == material_type::hair) {
+    return eval_hair_scattering_and_pdf(point.hair, outgoing, incoming);
+  }
+  return {eval_bsdfcos(point, outgoing, incoming),
+      sample_bsdfcos_pdf(point, outgoing, incoming)};
+}
+
+// Whether eval_bsdfcos can be non-zero for this pair: surfaces scatter only
+// into the hemisphere of the outgoing direction; fibers everywhere.
+static bool may_scatter(const trace_point& point, const vec3f& outgoing, const vec3f& incoming) {
+  return point.type == material_type::hair ||
+         (dot(point.normal, incoming) > 0 && dot(point.normal, outgoing) > 0);
+}
+
 static vec3f sample_bsdfcos(const trace_point& point, const vec3f& outgoing, float rnl,
     const vec2f& rn, const trace_params& params, rng_state& rng) {
   if (point.type == material_type::hair) {
@@ -286,9 +304,12 @@ static trace_point eval_trace_point(const scene_data& scene, const trace_context
     point.tangent  = fiber.tangent;
     point.normal   = fiber.normal;
     if (material.type == material_type::hair) {
-      point.hair = params.hair_per_hit
-                       ? eval_hair_brdf(material.hair, fiber.h, fiber.frame)
-                       : eval_hair_brdf(context.hair[instance.material], fiber.h, fiber.frame);
+      // With the outgoing direction, so that the terms depending on it are
+      // computed once for the three or four hair calls of this hit.
+      point.hair = eval_hair_brdf(params.hair_per_hit
+                                      ? make_hair_precomputed(material.hair)
+                                      : context.hair[instance.material],
+          fiber.h, fiber.frame, -ray.d);
     }
   }
   if (material.color_tex >= 0)
@@ -374,9 +395,9 @@ static vec3f trace_path(const scene_data& scene, const scene_bvh& bvh,
       auto  ruv      = rand2f(rng);
       auto  light_uv = vec2f{0, 0};
       auto  incoming = sample_light(scene, light, point.position, rel, ruv, light_uv);
-      auto  bsdfcos  = incoming == vec3f{0, 0, 0} ? vec3f{0, 0, 0}
-                                                 : eval_bsdfcos(point, outgoing, incoming);
-      if (bsdfcos != vec3f{0, 0, 0}) {
+      // The BSDF is evaluated only for visible light samples, the shadow ray
+      // skipped only where it is zero for certain.
+      if (incoming != vec3f{0, 0, 0} && may_scatter(point, outgoing, incoming)) {
         auto shadow   = spawn_ray(point, incoming);
         auto emission = vec3f{0, 0, 0};
         auto pdf      = 0.0f;
@@ -413,8 +434,8 @@ static vec3f trace_path(const scene_data& scene, const scene_bvh& bvh,
         }
         rays++;
         if (pdf > 0 && emission != vec3f{0, 0, 0}) {
-          auto mis = delta ? 1.0f
-                           : power_heuristic(pdf, sample_bsdfcos_pdf(point, outgoing, incoming));
+          auto [bsdfcos, scatter_pdf] = eval_bsdfcos_and_pdf(point, outgoing, incoming);
+          auto mis = delta ? 1.0f : power_heuristic(pdf, scatter_pdf);
           radiance += weight * bsdfcos * emission * (mis / pdf);
         }
       }
@@ -425,8 +446,7 @@ static vec3f trace_path(const scene_data& scene, const scene_bvh& bvh,
     auto rn       = rand2f(rng);
     auto incoming = sample_bsdfcos(point, outgoing, rnl, rn, params, rng);
     if (incoming == vec3f{0, 0, 0} || !isfinite(incoming)) break;
-    auto pdf     = sample_bsdfcos_pdf(point, outgoing, incoming);
-    auto bsdfcos = eval_bsdfcos(point, outgoing, incoming);
+    auto [bsdfcos, pdf] = eval_bsdfcos_and_pdf(point, outgoing, incoming);
     if (!(pdf > 0) || bsdfcos == vec3f{0, 0, 0}) break;
     weight *= bsdfcos / pdf;
     bsdf_pdf = pdf;

@@ -288,17 +288,6 @@ static float relative_phi(const hair_angles& wo, const hair_angles& wi) {
   return std::atan2(wo.y * wi.z - wo.z * wi.y, wo.y * wi.y + wo.z * wi.z);
 }
 
-// Terms that depend on theta_o (and the hit): attenuations A_p, lobe pdfs
-// (filled by make_lobe_pdfs), azimuthal offsets Phi(p, h), and the tilted
-// sin/cos of theta_o for each longitudinal lobe.
-struct hair_lobes {
-  vec3f a[4]          = {};
-  float a_pdf[4]      = {0, 0, 0, 0};
-  float phi_shift[3]  = {0, 0, 0};
-  float sin_theta[4]  = {0, 0, 0, 0};
-  float cos_theta[4]  = {1, 1, 1, 1};
-};
-
 // Fresnel reflectance of a dielectric of relative index eta >= 1 seen from
 // outside, unpolarised.
 static float fresnel_dielectric(float eta, float cos_i) {
@@ -365,17 +354,24 @@ static hair_lobes make_lobes(const hair_brdf& brdf, const hair_angles& wo) {
   lobes.sin_theta[3] = sin_o;
   lobes.cos_theta[3] = cos_o;
   for (auto p = 0; p < 4; p++) lobes.cos_theta[p] = std::abs(lobes.cos_theta[p]);
-  return lobes;
-}
 
-// Lobe choice proportional to the luminance of A_p (hair.pdf "Sampling");
-// all zero if the fiber returns nothing.
-static void make_lobe_pdfs(hair_lobes& lobes) {
+  // Lobe choice proportional to the luminance of A_p (hair.pdf "Sampling");
+  // all zero if the fiber returns nothing.
   auto total = 0.0f;
   for (auto p = 0; p < 4; p++) total += lobes.a_pdf[p] = luminance(lobes.a[p]);
   if (total > 0) {
     for (auto p = 0; p < 4; p++) lobes.a_pdf[p] /= total;
   }
+  return lobes;
+}
+
+// The lobes of outgoing: those cached in the brdf if it was made for this
+// direction, else computed into storage.
+static const hair_lobes& find_lobes(const hair_brdf& brdf,
+    const vec3f& outgoing, const hair_angles& wo, hair_lobes& storage) {
+  if (brdf.has_outgoing && outgoing == brdf.outgoing) return brdf.lobes;
+  storage = make_lobes(brdf, wo);
+  return storage;
 }
 
 // Angle wrapped into [-pi, pi] without loops (a NaN stays a NaN, never hangs).
@@ -406,15 +402,26 @@ static float sample_azimuthal(const hair_precomputed& mat, float u) {
 // -----------------------------------------------------------------------------
 namespace yocto {
 
+hair_brdf eval_hair_brdf(const hair_precomputed& material, float h,
+    const frame3f& frame, const vec3f& outgoing) {
+  auto brdf         = eval_hair_brdf(material, h, frame);
+  brdf.lobes        = make_lobes(brdf, make_angles(brdf, outgoing));
+  brdf.outgoing     = outgoing;
+  brdf.has_outgoing = true;
+  return brdf;
+}
+
 // M_p N_p of each lobe for a pair of directions (N = 1 / 2 pi for p_max), the
 // part that eval and pdf share; they weight it by A_p and by the lobe choice.
-static void eval_lobe_products(const hair_brdf& brdf, const vec3f& outgoing,
-    const vec3f& incoming, hair_lobes& lobes, float products[4]) {
-  auto& mat = brdf.material;
-  auto  wo  = make_angles(brdf, outgoing);
-  auto  wi  = make_angles(brdf, incoming);
-  auto  phi = relative_phi(wo, wi);
-  lobes     = make_lobes(brdf, wo);
+// Returns the lobes of outgoing (cached in the brdf or computed in storage).
+static const hair_lobes& eval_lobe_products(const hair_brdf& brdf,
+    const vec3f& outgoing, const vec3f& incoming, hair_lobes& storage,
+    float products[4]) {
+  auto& mat   = brdf.material;
+  auto  wo    = make_angles(brdf, outgoing);
+  auto  wi    = make_angles(brdf, incoming);
+  auto  phi   = relative_phi(wo, wi);
+  auto& lobes = find_lobes(brdf, outgoing, wo, storage);
   for (auto p = 0; p < 4; p++) {
     auto m = eval_longitudinal(mat.v[p], mat.m_scale[p], wi.sin_theta,
         wi.cos_theta, lobes.sin_theta[p], lobes.cos_theta[p]);
@@ -422,16 +429,17 @@ static void eval_lobe_products(const hair_brdf& brdf, const vec3f& outgoing,
                    : 1 / (2 * pif);
     products[p] = m * n;
   }
+  return lobes;
 }
 
 vec3f eval_hair_scattering(
     const hair_brdf& brdf, const vec3f& outgoing, const vec3f& incoming) {
   // hair.pdf eq. 3 is f = sum_p M_p A_p N_p / |cos theta_i|; the tracer
   // needs f times the cosine, so the sum itself is returned.
-  auto lobes    = hair_lobes{};
+  auto  storage = hair_lobes{};
   float products[4];
-  eval_lobe_products(brdf, outgoing, incoming, lobes, products);
-  auto sum = vec3f{0, 0, 0};
+  auto& lobes = eval_lobe_products(brdf, outgoing, incoming, storage, products);
+  auto  sum   = vec3f{0, 0, 0};
   for (auto p = 0; p < 4; p++) sum += products[p] * lobes.a[p];
   return sum;
 }
@@ -439,13 +447,26 @@ vec3f eval_hair_scattering(
 float sample_hair_scattering_pdf(
     const hair_brdf& brdf, const vec3f& outgoing, const vec3f& incoming) {
   // The same lobes as eval, weighted by the lobe choice instead of A_p.
-  auto lobes    = hair_lobes{};
+  auto  storage = hair_lobes{};
   float products[4];
-  eval_lobe_products(brdf, outgoing, incoming, lobes, products);
-  make_lobe_pdfs(lobes);
-  auto pdf = 0.0f;
+  auto& lobes = eval_lobe_products(brdf, outgoing, incoming, storage, products);
+  auto  pdf   = 0.0f;
   for (auto p = 0; p < 4; p++) pdf += products[p] * lobes.a_pdf[p];
   return pdf;
+}
+
+std::pair<vec3f, float> eval_hair_scattering_and_pdf(
+    const hair_brdf& brdf, const vec3f& outgoing, const vec3f& incoming) {
+  auto  storage = hair_lobes{};
+  float products[4];
+  auto& lobes = eval_lobe_products(brdf, outgoing, incoming, storage, products);
+  auto  sum   = vec3f{0, 0, 0};
+  auto  pdf   = 0.0f;
+  for (auto p = 0; p < 4; p++) {
+    sum += products[p] * lobes.a[p];
+    pdf += products[p] * lobes.a_pdf[p];
+  }
+  return {sum, pdf};
 }
 
 vec3f sample_hair_scattering(
@@ -457,9 +478,9 @@ vec3f sample_hair_scattering(
 vec3f sample_hair_scattering(
     const hair_brdf& brdf, const vec3f& outgoing, const vec4f& rn) {
   auto& mat   = brdf.material;
-  auto  wo    = make_angles(brdf, outgoing);
-  auto  lobes = make_lobes(brdf, wo);
-  make_lobe_pdfs(lobes);
+  auto  wo      = make_angles(brdf, outgoing);
+  auto  storage = hair_lobes{};
+  auto& lobes   = find_lobes(brdf, outgoing, wo, storage);
 
   // Lobe p with probability a_pdf[p].
   auto p = 0, last = -1;

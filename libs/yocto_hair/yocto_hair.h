@@ -25,6 +25,8 @@
 
 #include <yocto/yocto_math.h>
 
+#include <utility>
+
 // -----------------------------------------------------------------------------
 // HAIR MATERIAL AND BSDF
 // -----------------------------------------------------------------------------
@@ -63,16 +65,33 @@ struct hair_precomputed {
   float cos_2k_alpha[3] = {1, 1, 1};  // cos of alpha, 2 alpha, 4 alpha
 };
 
+// Terms that depend on the outgoing direction and h: attenuations A_p, lobe
+// choice probabilities, azimuthal offsets Phi(p, h) and the tilted sines and
+// cosines of theta_o of each longitudinal lobe.
+struct hair_lobes {
+  vec3f a[4]         = {};
+  float a_pdf[4]     = {0, 0, 0, 0};
+  float phi_shift[3] = {0, 0, 0};
+  float sin_theta[4] = {0, 0, 0, 0};
+  float cos_theta[4] = {1, 1, 1, 1};
+};
+
 // Everything precomputed for one hit: the material terms, the offset h and
-// the orthonormal fiber frame (x tangent, y = z × x, z normal).
+// the orthonormal fiber frame (x tangent, y = z × x, z normal); and, if the
+// outgoing direction was given, the lobes for it, which the three scattering
+// functions then reuse whenever they are called with that same direction (a
+// path tracer makes three or four calls per hit, all with one outgoing).
 struct hair_brdf {
-  hair_precomputed material    = {};
-  float            h           = 0;  // signed offset in [-1, 1]
-  float            gamma_o     = 0;  // asin(h)
-  float            cos_gamma_o = 1;
-  vec3f            x           = {1, 0, 0};
-  vec3f            y           = {0, 1, 0};
-  vec3f            z           = {0, 0, 1};
+  hair_precomputed material     = {};
+  float            h            = 0;  // signed offset in [-1, 1]
+  float            gamma_o      = 0;  // asin(h)
+  float            cos_gamma_o  = 1;
+  vec3f            x            = {1, 0, 0};
+  vec3f            y            = {0, 1, 0};
+  vec3f            z            = {0, 0, 1};
+  bool             has_outgoing = false;  // lobes hold the terms of outgoing
+  vec3f            outgoing     = {0, 0, 0};
+  hair_lobes       lobes        = {};
 };
 
 // Material terms: clamped roughness, variances, logistic scale, tilt sines
@@ -85,6 +104,10 @@ hair_precomputed make_hair_precomputed(const hair_material& material);
 hair_brdf eval_hair_brdf(const hair_material& material, float h, const frame3f& frame);
 hair_brdf eval_hair_brdf(
     const hair_precomputed& material, float h, const frame3f& frame);
+// The same, with the terms of one outgoing direction computed once for all
+// later calls with it (any other direction still works, at full cost).
+hair_brdf eval_hair_brdf(const hair_precomputed& material, float h,
+    const frame3f& frame, const vec3f& outgoing);
 
 // BSDF times cosine (Yocto's bsdfcos convention): sum over p of M_p A_p N_p.
 // World directions, both pointing away from the fiber.
@@ -106,6 +129,12 @@ vec3f sample_hair_scattering(
 
 // Solid-angle pdf of sample_hair_scattering.
 float sample_hair_scattering_pdf(
+    const hair_brdf& brdf, const vec3f& outgoing, const vec3f& incoming);
+
+// eval_hair_scattering and sample_hair_scattering_pdf in one pass, with the
+// same results: multiple importance sampling needs both for one pair of
+// directions, and they share every M_p N_p product.
+std::pair<vec3f, float> eval_hair_scattering_and_pdf(
     const hair_brdf& brdf, const vec3f& outgoing, const vec3f& incoming);
 
 // Absorption coefficient from eumelanin and pheomelanin concentrations
