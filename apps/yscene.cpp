@@ -27,6 +27,21 @@ static int print_error(const std::string& message) {
   return 1;
 }
 
+// Creates the missing directories above an output file before the work that
+// fills it, so that a long render or a conversion does not fail at its end.
+static bool make_output_directory(const std::string& output, std::string& error) {
+  auto directory = std::filesystem::path(output).parent_path();
+  auto ec        = std::error_code{};
+  if (directory.empty() || std::filesystem::is_directory(directory, ec)) return true;
+  std::filesystem::create_directories(directory, ec);
+  if (ec || !std::filesystem::is_directory(directory)) {
+    error = output + ": cannot create directory " + directory.string() +
+            (ec ? " (" + ec.message() + ")" : "");
+    return false;
+  }
+  return true;
+}
+
 static double seconds_since(std::chrono::steady_clock::time_point start) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 }
@@ -165,6 +180,7 @@ static int run_render(const render_options& options, trace_params params,
   auto scene = scene_data{};
   auto error = std::string{};
   if (!load_any_scene(options.scene, scene, error, {})) return print_error(error);
+  if (!make_output_directory(options.output, error)) return print_error(error);
   add_missing_camera(scene);
   if (options.curves == "lines") {
     for (auto& shape : scene.shapes)
@@ -330,6 +346,7 @@ static int run_convert(const std::string& input, const std::string& output,
     for (auto& shape : scene.shapes)
       if (!shape.curves.empty()) shape = curves_to_lines(shape, params.segments);
   }
+  if (!make_output_directory(output, error)) return print_error(error);
   if (!save_scene(output, scene, error)) return print_error(error);
   auto curves = (size_t)0, lines = (size_t)0;
   for (auto& shape : scene.shapes) {
@@ -433,6 +450,7 @@ static int run_hair(const hair_options& options, hair_style_params params,
     auto scene = make_hair_scene(params, material);
     strands    = (size_t)params.strands;
     segments   = scene.shapes[0].curves.size();
+    if (!make_output_directory(output, error)) return print_error(error);
     if (!save_scene(output, scene, error)) return print_error(error);
   } else if (is_pbrt || extension == ".hair" || extension == ".ply") {
     // Strands only: stand-in geometry for scenes that include or load it.
@@ -448,6 +466,7 @@ static int run_hair(const hair_options& options, hair_style_params params,
           options.fit_camera.c_str(), frame_scale(frame), center(compute_bounds(shape)).x,
           center(compute_bounds(shape)).y, center(compute_bounds(shape)).z);
     }
+    if (!make_output_directory(output, error)) return print_error(error);
     auto ok = is_pbrt ? save_pbrt_curves(output, shape, error)
               : extension == ".hair" ? save_hair_model(output, shape, error)
                                      : save_shape(output, shape, error);

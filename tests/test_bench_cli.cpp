@@ -13,24 +13,9 @@
 #include <sstream>
 #include <string>
 
+#include "run_yscene.h"
+
 namespace fs = std::filesystem;
-
-struct command_result {
-  int         status = -1;
-  std::string output = "";  // stdout and stderr together
-};
-
-static command_result run_yscene(const std::string& arguments) {
-  auto command = std::string(YSCENE_EXE) + " " + arguments + " 2>&1";
-  auto pipe    = popen(command.c_str(), "r");
-  auto result  = command_result{};
-  if (!pipe) return result;
-  char buffer[4096];
-  while (auto read = fread(buffer, 1, sizeof(buffer), pipe)) result.output.append(buffer, read);
-  auto status   = pclose(pipe);
-  result.status = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  return result;
-}
 
 static std::string read_bytes(const fs::path& path) {
   auto stream = std::ifstream(path, std::ios::binary);

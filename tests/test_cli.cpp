@@ -12,25 +12,10 @@
 #include <filesystem>
 #include <fstream>
 
+#include "run_yscene.h"
+
 using namespace yocto;
 namespace fs = std::filesystem;
-
-struct command_result {
-  int         status = -1;
-  std::string output = "";  // stdout and stderr together
-};
-
-static command_result run(const std::string& arguments) {
-  auto command = std::string(YSCENE_EXE) + " " + arguments + " 2>&1";
-  auto pipe    = popen(command.c_str(), "r");
-  auto result  = command_result{};
-  if (!pipe) return result;
-  char buffer[4096];
-  while (auto read = fread(buffer, 1, sizeof(buffer), pipe)) result.output.append(buffer, read);
-  auto status   = pclose(pipe);
-  result.status = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  return result;
-}
 
 // A fresh temporary directory per test.
 static fs::path make_test_dir(const std::string& name) {
@@ -83,9 +68,9 @@ static void expect_failure(const command_result& result, const std::string& name
 
 TEST(cli, missing_scene_file) {
   auto dir    = make_test_dir("missing");
-  auto result = run((dir / "nothere.json").string() + " --output x.png");  // no command
+  auto result = run_yscene((dir / "nothere.json").string() + " --output x.png");  // no command
   EXPECT_EQ(result.status, 1);
-  result = run("render " + (dir / "nothere.json").string() + " --output " +
+  result = run_yscene("render " + (dir / "nothere.json").string() + " --output " +
                (dir / "out.png").string());
   expect_failure(result, "nothere.json");
   EXPECT_TRUE(list_files(dir).empty());
@@ -94,7 +79,7 @@ TEST(cli, missing_scene_file) {
 TEST(cli, malformed_json_names_file_and_line) {
   auto dir = make_test_dir("json");
   write_file(dir / "bad.json", "{\n  \"cameras\": [\n    {\"lens\": 0.05,}\n  ]\n}\n");
-  auto result = run("render " + (dir / "bad.json").string() + " --output " +
+  auto result = run_yscene("render " + (dir / "bad.json").string() + " --output " +
                     (dir / "out.png").string());
   expect_failure(result, "bad.json");
   EXPECT_NE(result.output.find("line 3"), std::string::npos) << result.output;
@@ -104,11 +89,11 @@ TEST(cli, malformed_json_names_file_and_line) {
 TEST(cli, wrong_types_and_references_are_errors) {
   auto dir = make_test_dir("types");
   write_file(dir / "types.json", R"({"cameras": [{"lens": "long"}]})");
-  expect_failure(run("render " + (dir / "types.json").string() + " -o " +
+  expect_failure(run_yscene("render " + (dir / "types.json").string() + " -o " +
                      (dir / "out.png").string()), "lens");
   write_file(dir / "refs.json",
       R"({"materials": [{"type": "matte"}], "instances": [{"shape": 3, "material": 0}]})");
-  expect_failure(run("render " + (dir / "refs.json").string() + " -o " +
+  expect_failure(run_yscene("render " + (dir / "refs.json").string() + " -o " +
                      (dir / "out.png").string()), "shape");
   EXPECT_FALSE(fs::exists(dir / "out.png"));
 }
@@ -120,10 +105,10 @@ TEST(cli, missing_and_truncated_ply) {
   auto ply  = dir / "shapes" / "sphere.ply";
   auto size = fs::file_size(ply);
   fs::resize_file(ply, size / 2);
-  expect_failure(run("render " + (dir / "scene.json").string() + " -o " +
+  expect_failure(run_yscene("render " + (dir / "scene.json").string() + " -o " +
                      (dir / "out.exr").string()), "sphere.ply");
   fs::remove(ply);
-  expect_failure(run("render " + (dir / "scene.json").string() + " -o " +
+  expect_failure(run_yscene("render " + (dir / "scene.json").string() + " -o " +
                      (dir / "out.exr").string()), "sphere.ply");
   EXPECT_FALSE(fs::exists(dir / "out.exr"));
 }
@@ -134,7 +119,7 @@ TEST(cli, unreadable_texture) {
   write_file(dir / "scene.json", R"({"cameras": [{"lookat": [0, 0, 4, 0, 0, 0, 0, 1, 0]}],
     "textures": [{"name": "sky", "uri": "sky.hdr"}],
     "environments": [{"emission": [1, 1, 1], "emission_tex": 0}]})");
-  expect_failure(run("render " + (dir / "scene.json").string() + " -o " +
+  expect_failure(run_yscene("render " + (dir / "scene.json").string() + " -o " +
                      (dir / "out.png").string()), "sky.hdr");
   EXPECT_FALSE(fs::exists(dir / "out.png"));
 }
@@ -142,7 +127,7 @@ TEST(cli, unreadable_texture) {
 TEST(cli, unknown_output_extension) {
   auto dir = make_test_dir("extension");
   write_small_scene(dir);
-  expect_failure(run("render " + (dir / "scene.json").string() + " -o " +
+  expect_failure(run_yscene("render " + (dir / "scene.json").string() + " -o " +
                      (dir / "out.xyz").string()), "out.xyz");
   EXPECT_FALSE(fs::exists(dir / "out.xyz"));
 }
@@ -152,7 +137,7 @@ TEST(cli, render_writes_a_complete_image_and_nothing_else) {
   write_small_scene(dir);
   auto before = list_files(dir);
   for (auto name : {"out.png", "out.exr", "out.hdr", "out.pfm", "out.jpg"}) {
-    auto result = run("render " + (dir / "scene.json").string() + " -o " +
+    auto result = run_yscene("render " + (dir / "scene.json").string() + " -o " +
                       (dir / name).string() + " -s 2 -r 32 --quiet");
     EXPECT_EQ(result.status, 0) << result.output;
     EXPECT_NE(result.output.find("rays/s"), std::string::npos) << result.output;
@@ -165,11 +150,34 @@ TEST(cli, render_writes_a_complete_image_and_nothing_else) {
   EXPECT_EQ(after.size(), before.size() + 5);  // no temporaries left
 }
 
+TEST(cli, outputs_go_into_new_directories_or_fail_before_the_work) {
+  auto dir = make_test_dir("directories");
+  write_small_scene(dir);
+  auto scene = (dir / "scene.json").string();
+  auto result = run_yscene("render " + scene + " -o " + (dir / "a/b/out.png").string() +
+                    " -s 1 -r 16 --quiet");
+  EXPECT_EQ(result.status, 0) << result.output;
+  EXPECT_TRUE(fs::is_regular_file(dir / "a/b/out.png"));
+  result = run_yscene("hair --style straight --strands 10 -o " + (dir / "c/d/hair.pbrt").string());
+  EXPECT_EQ(result.status, 0) << result.output;
+  result = run_yscene("convert " + (dir / "c/d/hair.pbrt").string() + " " +
+               (dir / "e/f/hair.json").string());
+  EXPECT_EQ(result.status, 0) << result.output;
+  EXPECT_TRUE(fs::is_regular_file(dir / "e/f/hair.json"));
+  // A directory that cannot be made (a file is in the way): the error comes
+  // before rendering (no summary line) and names the output.
+  write_file(dir / "file", "not a directory");
+  auto blocked = (dir / "file/out.png").string();
+  result = run_yscene("render " + scene + " -o " + blocked + " -s 1 -r 16 --quiet");
+  expect_failure(result, blocked);
+  EXPECT_EQ(result.output.find("rays/s"), std::string::npos) << result.output;
+}
+
 TEST(cli, threads_one_and_two_give_the_same_image) {
   auto dir = make_test_dir("threads");
-  ASSERT_EQ(run("hair --style curly --strands 200 -o " + (dir / "hair.json").string()).status, 0);
+  ASSERT_EQ(run_yscene("hair --style curly --strands 200 -o " + (dir / "hair.json").string()).status, 0);
   for (auto threads : {1, 2}) {
-    auto result = run("render " + (dir / "hair.json").string() + " -o " +
+    auto result = run_yscene("render " + (dir / "hair.json").string() + " -o " +
                       (dir / ("t" + std::to_string(threads) + ".exr")).string() +
                       " -s 2 -r 40 --quiet --threads " + std::to_string(threads));
     ASSERT_EQ(result.status, 0) << result.output;
@@ -183,7 +191,7 @@ TEST(cli, threads_one_and_two_give_the_same_image) {
 
 TEST(cli, sigint_saves_the_samples_done) {
   auto dir = make_test_dir("sigint");
-  ASSERT_EQ(run("hair --style straight --strands 500 -o " + (dir / "hair.json").string()).status, 0);
+  ASSERT_EQ(run_yscene("hair --style straight --strands 500 -o " + (dir / "hair.json").string()).status, 0);
   // Far more samples than 2 seconds allow; SIGINT after 2 seconds.
   auto command = "timeout --preserve-status -s INT 2 " + std::string(YSCENE_EXE) + " render " +
                  (dir / "hair.json").string() + " -o " + (dir / "out.exr").string() +
@@ -203,8 +211,8 @@ TEST(cli, sigint_saves_the_samples_done) {
 
 TEST(cli, info_prints_counts) {
   auto dir = make_test_dir("info");
-  ASSERT_EQ(run("hair --style block --strands 100 --segments 2 -o " + (dir / "block.json").string()).status, 0);
-  auto result = run("info " + (dir / "block.json").string());
+  ASSERT_EQ(run_yscene("hair --style block --strands 100 --segments 2 -o " + (dir / "block.json").string()).status, 0);
+  auto result = run_yscene("info " + (dir / "block.json").string());
   EXPECT_EQ(result.status, 0) << result.output;
   EXPECT_NE(result.output.find("fiber segments: 200"), std::string::npos) << result.output;
   EXPECT_NE(result.output.find("bounds:"), std::string::npos) << result.output;
@@ -218,9 +226,9 @@ TEST(cli, convert_bad_input_leaves_nothing) {
   write_file(dir / "string.pbrt", "WorldBegin\nMaterial \"hair\n");
   write_file(dir / "short.hair", std::string("HAIR\x02\x00\x00\x00", 8));
   auto out = (dir / "out" / "scene.json").string();
-  expect_failure(run("convert " + (dir / "missing.pbrt").string() + " " + out), "nothere.pbrt");
-  expect_failure(run("convert " + (dir / "string.pbrt").string() + " " + out), "string.pbrt");
-  expect_failure(run("convert " + (dir / "short.hair").string() + " " + out), "short.hair");
+  expect_failure(run_yscene("convert " + (dir / "missing.pbrt").string() + " " + out), "nothere.pbrt");
+  expect_failure(run_yscene("convert " + (dir / "string.pbrt").string() + " " + out), "string.pbrt");
+  expect_failure(run_yscene("convert " + (dir / "short.hair").string() + " " + out), "short.hair");
   EXPECT_FALSE(fs::exists(dir / "out"));
 }
 
@@ -228,9 +236,9 @@ TEST(cli, convert_generated_hair_round_trips) {
   auto dir = make_test_dir("roundtrip");
   for (auto extension : {".pbrt", ".pbrt.gz", ".hair"}) {
     auto strands = (dir / (std::string("strands") + extension)).string();
-    ASSERT_EQ(run("hair --style curly --strands 30 --segments 6 -o " + strands).status, 0);
+    ASSERT_EQ(run_yscene("hair --style curly --strands 30 --segments 6 -o " + strands).status, 0);
     auto json   = (dir / (std::string("converted") + extension + ".json")).string();
-    auto result = run("convert " + strands + " " + json);
+    auto result = run_yscene("convert " + strands + " " + json);
     ASSERT_EQ(result.status, 0) << result.output;
     auto scene = scene_data{};
     auto error = std::string{};

@@ -17,34 +17,6 @@
 // -----------------------------------------------------------------------------
 namespace yocto {
 
-void append_catmull_rom_strand(shape_data& shape, const std::vector<vec3f>& points,
-    float root_radius, float tip_radius) {
-  auto n = (int)points.size();
-  if (n < 2) return;
-  // Tangents of a uniform Catmull-Rom spline; at the ends, the chord.
-  auto tangent = [&](int i) {
-    if (i == 0) return points[1] - points[0];
-    if (i == n - 1) return points[n - 1] - points[n - 2];
-    return (points[i + 1] - points[i - 1]) / 2.0f;
-  };
-  auto radius = [&](float t) { return root_radius + (tip_radius - root_radius) * t; };
-  auto base   = (int)shape.positions.size();
-  shape.positions.push_back(points[0]);
-  shape.radius.push_back(radius(0));
-  for (auto i = 0; i < n - 1; i++) {
-    // Hermite to Bezier: inner control points at a third of the tangents.
-    shape.positions.push_back(points[i] + tangent(i) / 3.0f);
-    shape.positions.push_back(points[i + 1] - tangent(i + 1) / 3.0f);
-    shape.positions.push_back(points[i + 1]);
-    auto t0 = (float)i / (n - 1), t1 = (float)(i + 1) / (n - 1);
-    shape.radius.push_back(radius(t0 + (t1 - t0) / 3));
-    shape.radius.push_back(radius(t0 + 2 * (t1 - t0) / 3));
-    shape.radius.push_back(radius(t1));
-    auto first = base + 3 * i;
-    shape.curves.push_back({first, first + 1, first + 2, first + 3});
-  }
-}
-
 // Keeps a point at least `offset` times the radius away from the head center.
 static vec3f push_out_of_head(const vec3f& p, float offset) {
   auto d = p - hair_head_center;
@@ -161,8 +133,14 @@ shape_data make_hair_strands(const hair_style_params& params) {
         points = make_block_fiber(rng, s, params.strands, npoints);
         break;
     }
-    auto tip = params.style == hair_style::block ? radius : radius * 0.2f;
-    append_catmull_rom_strand(shape, points, radius, tip);
+    // Radius tapering linearly from the root to a fifth at the tip (blocks
+    // of fibers keep theirs).
+    auto tip   = params.style == hair_style::block ? radius : radius * 0.2f;
+    auto radii = std::vector<float>(points.size());
+    for (size_t i = 0; i < radii.size(); i++) {
+      radii[i] = radius + (tip - radius) * (float)i / std::max((int)radii.size() - 1, 1);
+    }
+    append_catmull_rom_strand(shape, points, radii);
   }
   return shape;
 }

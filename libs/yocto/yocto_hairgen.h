@@ -53,12 +53,6 @@ texture_data make_sky_texture(int width, int height, const vec3f& sun_direction)
 // material, and the head sphere (head styles) or a floor (block).
 scene_data make_hair_scene(const hair_style_params& params, const hair_material& hair);
 
-// Converts a polyline of points into a chain of cubic Bezier segments
-// (uniform Catmull-Rom through the points, end tangents mirrored), appending
-// 3 (n - 1) + 1 vertices and n - 1 curves to the shape.
-void append_catmull_rom_strand(shape_data& shape, const std::vector<vec3f>& points,
-    float root_radius, float tip_radius);
-
 // Writes curves in pbrt's syntax (`Shape "curve"`, one per Bezier segment,
 // `point3 P` and widths as diameters) to .pbrt or gzip'd .pbrt.gz.
 bool save_pbrt_curves(const std::string& filename, const shape_data& shape,

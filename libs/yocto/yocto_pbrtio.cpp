@@ -1984,38 +1984,16 @@ static bool load_hair_model(const std::string& filename, shape_data& shape,
     }
   }
   if (has_color_array) *has_color_array = (flags & hair_has_color) != 0;
-  // Catmull-Rom through each strand's points as cubic Bezier segments:
-  // tangents m_i = (p_{i+1} - p_{i-1}) / 2 (one-sided at the ends), inner
-  // control points p_i + m_i / 3 and p_{i+1} - m_{i+1} / 3.
+  // A Catmull-Rom spline through each strand's points.
   shape.positions.reserve(points * 3);
   shape.radius.reserve(points * 3);
   auto first = (uint64_t)0;
   for (auto s = (uint64_t)0; s < strands; s++) {
-    auto count = strand_segments(s);
-    auto p     = [&](int64_t i) {
-      return positions[first + std::clamp<int64_t>(i, 0, (int64_t)count)];
-    };
-    auto r       = [&](int64_t i) { return radii[first + i]; };
-    auto tangent = [&](int64_t i) {
-      if (i == 0) return p(1) - p(0);
-      if (i == (int64_t)count) return p(count) - p(count - 1);
-      return (p(i + 1) - p(i - 1)) / 2.0f;
-    };
-    if (count > 0) {
-      shape.positions.push_back(p(0));
-      shape.radius.push_back(r(0));
-    }
-    for (auto i = (int64_t)0; i < (int64_t)count; i++) {
-      auto start = (int)shape.positions.size() - 1;
-      shape.positions.push_back(p(i) + tangent(i) / 3.0f);
-      shape.positions.push_back(p(i + 1) - tangent(i + 1) / 3.0f);
-      shape.positions.push_back(p(i + 1));
-      shape.radius.push_back((2 * r(i) + r(i + 1)) / 3);
-      shape.radius.push_back((r(i) + 2 * r(i + 1)) / 3);
-      shape.radius.push_back(r(i + 1));
-      shape.curves.push_back({start, start + 1, start + 2, start + 3});
-    }
-    first += count + 1;
+    auto count = strand_segments(s) + 1;
+    append_catmull_rom_strand(shape,
+        std::vector<vec3f>(positions.begin() + first, positions.begin() + first + count),
+        std::vector<float>(radii.begin() + first, radii.begin() + first + count));
+    first += count;
   }
   return true;
 }

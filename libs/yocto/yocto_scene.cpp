@@ -351,6 +351,32 @@ shape_data make_sphere_shape(int steps, float radius) {
   return shape;
 }
 
+void append_catmull_rom_strand(shape_data& shape, const std::vector<vec3f>& points,
+    const std::vector<float>& radii) {
+  auto n = (int)std::min(points.size(), radii.size());
+  if (n < 2) return;
+  // Tangents m_i = (p_{i+1} - p_{i-1}) / 2; the chord at the ends.
+  auto tangent = [&](int i) {
+    if (i == 0) return points[1] - points[0];
+    if (i == n - 1) return points[n - 1] - points[n - 2];
+    return (points[i + 1] - points[i - 1]) / 2.0f;
+  };
+  auto first = (int)shape.positions.size();
+  shape.positions.push_back(points[0]);
+  shape.radius.push_back(radii[0]);
+  for (auto i = 0; i < n - 1; i++) {
+    // Hermite to Bezier: inner control points at a third of the tangents.
+    shape.positions.push_back(points[i] + tangent(i) / 3.0f);
+    shape.positions.push_back(points[i + 1] - tangent(i + 1) / 3.0f);
+    shape.positions.push_back(points[i + 1]);
+    shape.radius.push_back((2 * radii[i] + radii[i + 1]) / 3);
+    shape.radius.push_back((radii[i] + 2 * radii[i + 1]) / 3);
+    shape.radius.push_back(radii[i + 1]);
+    shape.curves.push_back({first, first + 1, first + 2, first + 3});
+    first += 3;
+  }
+}
+
 shape_data make_quad_shape(const vec2f& size) {
   auto shape      = shape_data{};
   auto h          = size / 2.0f;

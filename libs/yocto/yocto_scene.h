@@ -204,6 +204,13 @@ fiber_point eval_fiber_point(const scene_data& scene, const instance_data& insta
 shape_data make_sphere_shape(int steps, float radius);
 shape_data make_quad_shape(const vec2f& size);
 
+// Appends a strand through the points to a curves shape: a uniform
+// Catmull-Rom spline (one-sided tangents at the ends) as n - 1 chained cubic
+// Bezier segments, 3 (n - 1) + 1 vertices, the radius interpolated linearly
+// between the points' radii. Fewer than 2 points append nothing.
+void append_catmull_rom_strand(shape_data& shape, const std::vector<vec3f>& points,
+    const std::vector<float>& radii);
+
 // Checks references and sizes; returns false with a message naming the element.
 bool validate_scene(const scene_data& scene, std::string& error);
 

@@ -34,9 +34,9 @@ struct trace_point {
   hair_brdf      hair      = {};
 };
 
-static bool is_delta_free_black(const trace_point& point) {
-  return point.type != material_type::hair && point.color == vec3f{0, 0, 0} &&
-         point.type == material_type::matte;
+// A black matte surface absorbs everything: the path ends there.
+static bool scatters_nothing(const trace_point& point) {
+  return point.type == material_type::matte && point.color == vec3f{0, 0, 0};
 }
 
 // Fresnel reflectance of a dielectric interface (unpolarised).
@@ -385,7 +385,7 @@ static vec3f trace_path(const scene_data& scene, const scene_bvh& bvh,
       }
       radiance += weight * point.emission * mis;
     }
-    if (is_delta_free_black(point)) break;
+    if (scatters_nothing(point)) break;
 
     // Next-event estimation: one light, one shadow ray.
     if (use_mis && !context.lights.empty()) {

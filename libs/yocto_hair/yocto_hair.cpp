@@ -432,31 +432,11 @@ static const hair_lobes& eval_lobe_products(const hair_brdf& brdf,
   return lobes;
 }
 
-vec3f eval_hair_scattering(
-    const hair_brdf& brdf, const vec3f& outgoing, const vec3f& incoming) {
-  // hair.pdf eq. 3 is f = sum_p M_p A_p N_p / |cos theta_i|; the tracer
-  // needs f times the cosine, so the sum itself is returned.
-  auto  storage = hair_lobes{};
-  float products[4];
-  auto& lobes = eval_lobe_products(brdf, outgoing, incoming, storage, products);
-  auto  sum   = vec3f{0, 0, 0};
-  for (auto p = 0; p < 4; p++) sum += products[p] * lobes.a[p];
-  return sum;
-}
-
-float sample_hair_scattering_pdf(
-    const hair_brdf& brdf, const vec3f& outgoing, const vec3f& incoming) {
-  // The same lobes as eval, weighted by the lobe choice instead of A_p.
-  auto  storage = hair_lobes{};
-  float products[4];
-  auto& lobes = eval_lobe_products(brdf, outgoing, incoming, storage, products);
-  auto  pdf   = 0.0f;
-  for (auto p = 0; p < 4; p++) pdf += products[p] * lobes.a_pdf[p];
-  return pdf;
-}
-
 std::pair<vec3f, float> eval_hair_scattering_and_pdf(
     const hair_brdf& brdf, const vec3f& outgoing, const vec3f& incoming) {
+  // hair.pdf eq. 3 is f = sum_p M_p A_p N_p / |cos theta_i|; the tracer
+  // needs f times the cosine, so the sum itself is returned. The pdf weights
+  // the same products by the lobe choice instead of A_p.
   auto  storage = hair_lobes{};
   float products[4];
   auto& lobes = eval_lobe_products(brdf, outgoing, incoming, storage, products);
@@ -467,6 +447,16 @@ std::pair<vec3f, float> eval_hair_scattering_and_pdf(
     pdf += products[p] * lobes.a_pdf[p];
   }
   return {sum, pdf};
+}
+
+vec3f eval_hair_scattering(
+    const hair_brdf& brdf, const vec3f& outgoing, const vec3f& incoming) {
+  return eval_hair_scattering_and_pdf(brdf, outgoing, incoming).first;
+}
+
+float sample_hair_scattering_pdf(
+    const hair_brdf& brdf, const vec3f& outgoing, const vec3f& incoming) {
+  return eval_hair_scattering_and_pdf(brdf, outgoing, incoming).second;
 }
 
 vec3f sample_hair_scattering(
