@@ -40,32 +40,33 @@ def main():
                         "-o", os.path.join(tmp, "out.pfm"), "-q", "-t", "1"] + args[1:],
                        check=True, stdout=subprocess.DEVNULL)
         report = subprocess.run(["perf", "report", "-i", data, "--no-children", "--stdio",
-                                 "--sort", "dso,symbol"], capture_output=True, text=True,
-                                check=True).stdout
-    shares, symbols = {name: 0.0 for name, _ in COMPONENTS}, []
-    shares["other"] = 0.0
+                                 "--sort", "dso,symbol", "--show-nr-samples"],
+                                capture_output=True, text=True, check=True).stdout
+    # Shares from the sample counts: the printed percentages are rounded to
+    # 0.01%, and Embree alone has thousands of unnamed addresses.
+    counts, symbols = {name: 0 for name, _ in COMPONENTS}, []
+    counts["other"] = 0
     for line in report.splitlines():
-        m = re.match(r"\s+([0-9.]+)%\s+(\S+)\s+\[.\]\s+(.*?)\s*$", line)
+        m = re.match(r"\s+[0-9.]+%\s+([0-9]+)\s+(\S+)\s+\[(.)\]\s+(.*?)\s*$", line)
         if not m:
-            m = re.match(r"\s+([0-9.]+)%\s+(\S+)\s+\[k\]\s+(.*?)\s*$", line)
-            if not m:
-                continue
-        share, dso, symbol = float(m.group(1)), m.group(2), m.group(3)
-        if line.find("[k]") >= 0:
+            continue
+        samples, dso, symbol = int(m.group(1)), m.group(2), m.group(4)
+        if m.group(3) == "k":
             dso = "[kernel]"
-        symbols.append((share, dso, symbol))
+        symbols.append((samples, dso, symbol))
         for name, match in COMPONENTS:
             if match(dso, symbol):
-                shares[name] += share
+                counts[name] += samples
                 break
         else:
-            shares["other"] += share
-    print("| component | share of CPU samples |\n|---|---:|")
-    for name, share in shares.items():
-        print(f"| {name} | {share:.1f}% |")
+            counts["other"] += samples
+    total = max(sum(counts.values()), 1)
+    print(f"| component | share of CPU samples ({total} samples) |\n|---|---:|")
+    for name, count in counts.items():
+        print(f"| {name} | {100 * count / total:.1f}% |")
     print("\ntop symbols:")
-    for share, dso, symbol in symbols[:15]:
-        print(f"  {share:5.2f}%  {dso:24s} {symbol[:70]}")
+    for samples, dso, symbol in sorted(symbols, reverse=True)[:15]:
+        print(f"  {100 * samples / total:5.2f}%  {dso:24s} {symbol[:70]}")
 
 
 if __name__ == "__main__":
