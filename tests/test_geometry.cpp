@@ -114,6 +114,24 @@ TEST(camera, center_ray_looks_down_minus_z_and_corners_match_the_field_of_view) 
   EXPECT_EQ(camera_resolution(camera, 640), (vec2i{640, 320}));
 }
 
+TEST(camera, project_camera_point_inverts_eval_camera) {
+  // A rotated portrait and a landscape camera; points along camera rays at
+  // several depths project back to the rays' image coordinates (1e-5).
+  for (auto aspect : {0.5f, 1.7f}) {
+    auto camera   = camera_data{};
+    camera.frame  = lookat_frame({1, 2, 5}, {-1, 0, 0}, {0.3f, 1, 0});
+    camera.aspect = aspect;
+    for (auto uv : {vec2f{0.5f, 0.5f}, vec2f{0.1f, 0.9f}, vec2f{1, 0}, vec2f{0.7f, 0.2f}}) {
+      auto ray = eval_camera(camera, uv, {0, 0});
+      for (auto depth : {0.5f, 3.0f, 40.0f}) {
+        auto projected = project_camera_point(camera, ray.o + ray.d * depth);
+        EXPECT_NEAR(projected.x, uv.x, 1e-5f) << aspect << " " << depth;
+        EXPECT_NEAR(projected.y, uv.y, 1e-5f) << aspect << " " << depth;
+      }
+    }
+  }
+}
+
 // -----------------------------------------------------------------------------
 // FIBER HITS THROUGH EMBREE
 // -----------------------------------------------------------------------------

@@ -86,15 +86,6 @@ static void expect_near(const vec3f& a, const vec3f& b, float tolerance = 1e-4f)
   EXPECT_NEAR(a.z, b.z, tolerance);
 }
 
-// Image coordinates (u right, v down, in [0,1]) of a world point.
-static vec2f project(const camera_data& camera, const vec3f& point) {
-  auto local = transform_point(inverse(camera.frame), point);
-  auto film  = camera.aspect >= 1 ? vec2f{camera.film, camera.film / camera.aspect}
-                                  : vec2f{camera.film * camera.aspect, camera.film};
-  auto x = local.x / -local.z * camera.lens, y = local.y / -local.z * camera.lens;
-  return {0.5f + x / film.x, 0.5f - y / film.y};
-}
-
 // The instance of the shape with the given curve count, or -1.
 static int curves_instance(const scene_data& scene) {
   for (auto i = 0; i < (int)scene.instances.size(); i++)
@@ -211,7 +202,7 @@ TEST(pbrtio_scenes, v3_sphere_hairblock_matches_pbrt_image_layout) {
   expect_near(transform_point(scene.instances[2].frame, {0, 0, 0}), {0, 5, 0});
   expect_near(transform_normal(scene.instances[2].frame, {0, 0, 1}), {0, -1, 0});
   // pbrt's render shows the sphere centred at about (220, 247) of 1000x500.
-  auto uv = project(camera, sphere.frame.o);
+  auto uv = project_camera_point(camera, sphere.frame.o);
   EXPECT_NEAR(uv.x, 0.22f, 0.02f);
   EXPECT_NEAR(uv.y, 0.494f, 0.03f);
   // The constant sky of pbrt's default infinite light.

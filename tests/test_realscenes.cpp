@@ -307,15 +307,6 @@ static silhouette fiber_silhouette(const scene_data& scene) {
   return result;
 }
 
-// Image coordinates (u right, v down, in [0,1]) of a world point.
-static vec2f project(const camera_data& camera, const vec3f& point) {
-  auto local = transform_point(inverse(camera.frame), point);
-  auto film  = camera.aspect >= 1 ? vec2f{camera.film, camera.film / camera.aspect}
-                                  : vec2f{camera.film * camera.aspect, camera.film};
-  auto x = local.x / -local.z * camera.lens, y = local.y / -local.z * camera.lens;
-  return {0.5f + x / film.x, 0.5f - y / film.y};
-}
-
 // Copies, writes stand-ins, converts (pbrt) and loads a real scene file.
 static void prepare_scene(const fs::path& source, const scene_copy& copy, scene_data& scene) {
   auto file = copy.path / source.filename();
@@ -428,9 +419,9 @@ static void check_real_scene(const fs::path& source) {
       auto bounds = compute_bounds(shape);
       auto radius = size(bounds).x / 2 * frame_scale(instance.frame);
       auto centre = transform_point(instance.frame, center(bounds));
-      auto top    = project(camera, centre + camera.frame.y * radius);
-      auto left   = project(camera, centre - camera.frame.x * radius);
-      auto right  = project(camera, centre + camera.frame.x * radius);
+      auto top    = project_camera_point(camera, centre + camera.frame.y * radius);
+      auto left   = project_camera_point(camera, centre - camera.frame.x * radius);
+      auto right  = project_camera_point(camera, centre + camera.frame.x * radius);
       EXPECT_LT(fibers.box.y, top.y) << "the head sphere shows above the hair";
       EXPECT_LT(fibers.box.x, left.x) << "the head sphere shows left of the hair";
       EXPECT_GT(fibers.box.z, right.x) << "the head sphere shows right of the hair";

@@ -319,9 +319,7 @@ frame3f fit_hair_to_camera(const camera_data& camera, const shape_data& strands,
     distance   = depth > 0 ? depth : camera.focus;
   }
   // Half the image plane at unit depth, as eval_camera spans it.
-  auto film = camera.aspect >= 1 ? vec2f{camera.film, camera.film / camera.aspect}
-                                 : vec2f{camera.film * camera.aspect, camera.film};
-  auto half = film / (2 * camera.lens);
+  auto half = camera_film_size(camera) / (2 * camera.lens);
   if (!(distance > 0) || !std::isfinite(distance) || !(half.x > 0) || !(half.y > 0) ||
       !std::isfinite(half.x) || !std::isfinite(half.y))
     return identity3x4f;

@@ -20,12 +20,15 @@ vec2i camera_resolution(const camera_data& camera, int resolution) {
   }
 }
 
+vec2f camera_film_size(const camera_data& camera) {
+  return camera.aspect >= 1 ? vec2f{camera.film, camera.film / camera.aspect}
+                            : vec2f{camera.film * camera.aspect, camera.film};
+}
+
 ray3f eval_camera(const camera_data& camera, const vec2f& image_uv, const vec2f& lens_uv) {
-  // The film spans `film` on its larger side; the image plane is at `lens`
-  // behind the pinhole, so a film point q maps to the direction -q.
-  auto film = camera.aspect >= 1
-                  ? vec2f{camera.film, camera.film / camera.aspect}
-                  : vec2f{camera.film * camera.aspect, camera.film};
+  // The image plane is at `lens` behind the pinhole, so a film point q maps
+  // to the direction -q.
+  auto film = camera_film_size(camera);
   auto q = vec3f{film.x * (0.5f - image_uv.x), film.y * (image_uv.y - 0.5f),
       camera.lens};
   if (camera.orthographic) {
@@ -45,6 +48,15 @@ ray3f eval_camera(const camera_data& camera, const vec2f& image_uv, const vec2f&
   auto lens_point  = vec3f{r * std::cos(phi), r * std::sin(phi), 0};
   return {transform_point(camera.frame, lens_point),
       transform_direction(camera.frame, focus_point - lens_point)};
+}
+
+vec2f project_camera_point(const camera_data& camera, const vec3f& point) {
+  // Camera space looks down -z; the film point at depth `lens` scales by
+  // lens / depth.
+  auto local = transform_point(inverse(camera.frame), point);
+  auto film  = camera_film_size(camera);
+  auto scale = camera.lens / -local.z;
+  return {0.5f + local.x * scale / film.x, 0.5f - local.y * scale / film.y};
 }
 
 }  // namespace yocto

@@ -132,6 +132,13 @@ namespace yocto {
 // sample luv for depth of field.
 ray3f eval_camera(const camera_data& camera, const vec2f& image_uv, const vec2f& lens_uv);
 
+// Film size: `film` on the image's larger side, the other by the aspect.
+vec2f camera_film_size(const camera_data& camera);
+
+// Image coordinates in [0,1]^2 (v down) where a pinhole camera sees a world
+// point in front of it: the inverse of eval_camera (any uv for points behind).
+vec2f project_camera_point(const camera_data& camera, const vec3f& point);
+
 // Image resolution for a camera whose largest side is `resolution` pixels.
 vec2i camera_resolution(const camera_data& camera, int resolution);
 
