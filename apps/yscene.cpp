@@ -176,8 +176,12 @@ static int run_render(const render_options& options, trace_params params,
     const CLI::App& command) {
   if (!is_image_filename(options.output))
     return print_error(options.output + ": unknown image extension (use exr, hdr, pfm, png or jpg)");
-  auto start = std::chrono::steady_clock::now();
-  auto scene = scene_data{};
+  // Ctrl-C from here on ends the render after its current pass (after the
+  // first, if it comes while loading) and saves the samples done.
+  interrupted   = false;
+  auto previous = std::signal(SIGINT, handle_sigint);
+  auto start    = std::chrono::steady_clock::now();
+  auto scene    = scene_data{};
   auto error = std::string{};
   if (!load_any_scene(options.scene, scene, error, {})) return print_error(error);
   if (!make_output_directory(options.output, error)) return print_error(error);
@@ -223,12 +227,10 @@ static int run_render(const render_options& options, trace_params params,
         format_count((double)bvh.peak_memory).c_str(), state.width, state.height);
 
   // Passes of one sample per pixel: Ctrl-C ends the current pass and saves.
-  interrupted         = false;
-  auto previous       = std::signal(SIGINT, handle_sigint);
   auto render_start   = std::chrono::steady_clock::now();
   auto render_cpu     = cpu_seconds();
   auto last_progress  = -1.0;
-  while (state.samples < params.samples && !interrupted) {
+  while (state.samples < params.samples && (state.samples == 0 || !interrupted)) {
     trace_samples(state, scene, bvh, context, params, 1);
     auto elapsed = seconds_since(render_start);
     if (options.checkpoints && is_power_of_two(state.samples)) {
@@ -516,6 +518,8 @@ int main(int argc, const char** argv) {
       ->check(CLI::Range(1, 64));
   render->add_flag("--hair-per-hit", params.hair_per_hit,
       "compute the hair material terms at every hit (as the thesis), not once per material");
+  render->add_flag("--hair-fast-pow", params.hair_fast_pow,
+      "hair roughness powers by repeated squaring instead of std::pow (matters with --hair-per-hit)");
   render->add_flag("--no-flatten", render_opts.no_flatten,
       "keep every instance an Embree instance (no single-level BVH for identity frames)");
   render->add_flag("--checkpoints", render_opts.checkpoints,

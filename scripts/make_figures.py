@@ -7,10 +7,12 @@ Usage: python3 scripts/make_figures.py [--samples N] [--resolution R]
 
 Needs the build (bash scripts/setup.sh) and python3-matplotlib. Each image is
 a generated scene (yscene hair) rendered with yscene render; the renders are
-cached in out/figures/ by their parameters.
+cached in out/figures/ by their parameters and the yscene binary (a rebuilt
+renderer renders them again).
 """
 
 import argparse
+import hashlib
 import os
 import subprocess
 import sys
@@ -62,8 +64,14 @@ def run(arguments):
     return result.stdout
 
 
+def binary_digest():
+    with open(YSCENE, "rb") as f:
+        return hashlib.sha1(f.read()).hexdigest()[:12]
+
+
 def render(style, strands, hair_args, samples, resolution, workdir):
-    key = "-".join([style, str(strands), str(samples), str(resolution)] + hair_args)
+    key = "-".join([style, str(strands), str(samples), str(resolution)] + hair_args +
+                   [binary_digest()])
     key = key.replace(" ", "").replace("--", "")
     image = os.path.join(workdir, key + ".png")
     if os.path.exists(image):

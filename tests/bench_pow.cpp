@@ -19,15 +19,6 @@
 
 using namespace yocto;
 
-// x^n by repeated squaring: log2(n) squarings and a multiply per set bit
-// (x^20 = ((x^4 x)^2)^2, five multiplies).
-template <int n>
-static inline float pow_int(float x) {
-  if constexpr (n == 0) return 1;
-  else if constexpr (n % 2 == 0) return sqr(pow_int<n / 2>(x));
-  else return x * pow_int<n - 1>(x);
-}
-
 static const std::vector<float>& get_betas() {
   static const auto betas = [] {
     auto rng   = make_rng(2024);
@@ -72,6 +63,18 @@ static void bench_make_hair_precomputed(benchmark::State& state) {
 }
 BENCHMARK(bench_make_hair_precomputed);
 
+static void bench_make_hair_precomputed_fast_pow(benchmark::State& state) {
+  auto& betas = get_betas();
+  auto  i     = 0;
+  for (auto _ : state) {
+    auto material   = hair_material{};
+    material.beta_m = betas[i++ & 1023];
+    material.beta_n = betas[(i * 7) & 1023];
+    benchmark::DoNotOptimize(make_hair_precomputed(material, true));
+  }
+}
+BENCHMARK(bench_make_hair_precomputed_fast_pow);
+
 // One hit's terms, with the material terms cached (the renderer's default)
 // and computed at the hit (--hair-per-hit, the thesis's layout).
 static void bench_eval_hair_brdf_cached(benchmark::State& state) {
@@ -98,6 +101,18 @@ static void bench_eval_hair_brdf_per_hit(benchmark::State& state) {
   }
 }
 BENCHMARK(bench_eval_hair_brdf_per_hit);
+
+static void bench_eval_hair_brdf_per_hit_fast_pow(benchmark::State& state) {
+  auto& betas    = get_betas();
+  auto  material = hair_material{};
+  auto  frame    = frame_fromz({0, 0, 0}, normalize(vec3f{0.3f, 0.2f, 1}));
+  auto  i        = 0;
+  for (auto _ : state) {
+    auto h = 2 * betas[i++ & 1023] - 1;
+    benchmark::DoNotOptimize(eval_hair_brdf(make_hair_precomputed(material, true), h, frame));
+  }
+}
+BENCHMARK(bench_eval_hair_brdf_per_hit_fast_pow);
 
 // The fast power gives the same values (relative difference of a few ulps):
 // checked once here so that the timing compares equal work.

@@ -11,6 +11,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <sstream>
 
 #include "run_yscene.h"
 
@@ -60,10 +61,19 @@ static void write_small_scene(const fs::path& dir) {
   ASSERT_TRUE(save_scene((dir / "scene.json").string(), scene, error)) << error;
 }
 
+// Exit status 1 and exactly one error line, which names `names`.
 static void expect_failure(const command_result& result, const std::string& names) {
   EXPECT_EQ(result.status, 1) << result.output;
-  EXPECT_NE(result.output.find("error: "), std::string::npos) << result.output;
-  EXPECT_NE(result.output.find(names), std::string::npos) << result.output;
+  auto error_lines = 0;
+  auto stream      = std::istringstream(result.output);
+  for (auto line = std::string{}; std::getline(stream, line);) {
+    if (line.find("error") != std::string::npos) {
+      error_lines++;
+      EXPECT_EQ(line.rfind("error: ", 0), 0u) << line;
+      EXPECT_NE(line.find(names), std::string::npos) << line;
+    }
+  }
+  EXPECT_EQ(error_lines, 1) << result.output;
 }
 
 TEST(cli, missing_scene_file) {
@@ -193,7 +203,9 @@ TEST(cli, sigint_saves_the_samples_done) {
   auto dir = make_test_dir("sigint");
   ASSERT_EQ(run_yscene("hair --style straight --strands 500 -o " + (dir / "hair.json").string()).status, 0);
   // Far more samples than 2 seconds allow; SIGINT after 2 seconds.
-  auto command = "timeout --preserve-status -s INT 2 " + std::string(YSCENE_EXE) + " render " +
+  // -k: should the signal be lost, the render is killed (and the test fails)
+  // instead of running for minutes.
+  auto command = "timeout -k 20 --preserve-status -s INT 2 " + std::string(YSCENE_EXE) + " render " +
                  (dir / "hair.json").string() + " -o " + (dir / "out.exr").string() +
                  " -s 100000 -r 32 2>&1";
   auto pipe   = popen(command.c_str(), "r");

@@ -1,8 +1,9 @@
 //
 // Tests of the hair scattering model's building blocks: the Bessel function,
 // the longitudinal lobe's normalisation, pigments, the Morton demux, the
-// wiring of h and the frame, and the hard numerical cases. The statistical
-// tests of the full BSDF are in test_hair_sampling.cpp.
+// wiring of h and the frame, and the hard numerical cases; then the
+// statistical tests of the full BSDF (furnaces, sampling weights and
+// consistency, chi-square goodness of fit).
 //
 
 #include <gtest/gtest.h>
@@ -243,6 +244,27 @@ TEST(hair, material_precedence) {
   EXPECT_EQ(pre.beta_m, 0.01f);
   EXPECT_EQ(pre.beta_n, 1.0f);
   EXPECT_GT(pre.v[0], 0.0f);
+}
+
+TEST(hair, fast_pow_matches_std_pow) {
+  // Powers of two are exact in float; the material terms with the fast power
+  // agree with std::pow's within 4e-6 relative (a few float roundings of the
+  // five multiplies, doubled by the square in v) over 1000 roughness values.
+  EXPECT_EQ(pow_int<20>(2.0f), 1048576.0f);
+  EXPECT_EQ(pow_int<22>(0.5f), 1.0f / 4194304.0f);
+  EXPECT_EQ(pow_int<0>(3.0f), 1.0f);
+  auto worst = 0.0f;
+  for (auto i = 0; i < 1000; i++) {
+    auto material   = hair_material{};
+    material.beta_m = 0.01f + 0.99f * i / 999;
+    material.beta_n = 1.0f - 0.99f * i / 999;
+    auto exact = make_hair_precomputed(material);
+    auto fast  = make_hair_precomputed(material, true);
+    worst = std::max(worst, std::abs(fast.v[0] - exact.v[0]) / exact.v[0]);
+    worst = std::max(worst, std::abs(fast.s - exact.s) / exact.s);
+  }
+  std::printf("[ figure ] fast pow: worst relative difference of v and s %.2g\n", worst);
+  EXPECT_LT(worst, 4e-6f);
 }
 
 TEST(hair, demux_hand_worked_bits) {
@@ -504,19 +526,23 @@ TEST(hair, white_furnace_uniform_sampling) {
 TEST(hair, white_furnace_quadrature) {
   // Deterministic: integral of eval over theta_i and phi with composite
   // Gauss-Legendre panels refined around every lobe (5 nodes per panel),
-  // for beta_m, beta_n in {0.02, 0.05, 0.1, 0.2, 0.4, 0.6, 0.8, 1}, theta_o in
-  // {-1.2, 0.1, 0.9} and h cycling through {-0.95, -0.3, 0.5, 0.99}.
+  // for beta_m, beta_n in {0.02, 0.05, 0.1, 0.2, 0.3, ..., 1}, theta_o in
+  // {-1.2, 0.1, 0.9}, h cycling through {-0.95, -0.3, 0.5, 0.99} and the
+  // scale tilt alpha through {0, 2, 10} degrees (432 configurations).
   // Tolerance 0.002.
-  auto betas  = std::vector<float>{0.02f, 0.05f, 0.1f, 0.2f, 0.4f, 0.6f, 0.8f, 1};
+  auto betas  = std::vector<float>{0.02f, 0.05f, 0.1f, 0.2f, 0.3f, 0.4f, 0.5f, 0.6f, 0.7f,
+       0.8f, 0.9f, 1};
   auto thetas = std::vector<double>{-1.2, 0.1, 0.9};
   auto hs     = std::vector<float>{-0.95f, -0.3f, 0.5f, 0.99f};
+  auto alphas = std::vector<float>{0, 2, 10};
   auto worst  = 0.0;
   auto count  = 0;
   for (auto beta_m : betas) {
     for (auto beta_n : betas) {
       for (auto theta_o : thetas) {
-        auto h        = hs[count++ % hs.size()];
-        auto material = white_material(beta_m, beta_n);
+        auto h        = hs[count % hs.size()];
+        auto material = white_material(beta_m, beta_n, alphas[count % alphas.size()]);
+        count++;
         auto pre      = make_hair_precomputed(material);
         auto brdf     = eval_hair_brdf(pre, h, frame3f{});
         auto wo       = local_direction(theta_o, pif / 2);
@@ -549,7 +575,8 @@ TEST(hair, white_furnace_quadrature) {
         }, 5);
         worst = std::max(worst, std::abs(integral - 1));
         EXPECT_NEAR(integral, 1, 0.002) << "beta_m " << beta_m << " beta_n "
-                                        << beta_n << " theta_o " << theta_o;
+                                        << beta_n << " theta_o " << theta_o
+                                        << " alpha " << material.alpha;
       }
     }
   }

@@ -51,6 +51,15 @@ inline constexpr float flt_eps = std::numeric_limits<float>::epsilon();
 namespace yocto {
 
 inline float sqr(float a) { return a * a; }
+// x^n for a constant n by repeated squaring: log2(n) squarings and a multiply
+// per set bit (x^20 = ((x^4 x)^2)^2, five multiplies).
+template <int n>
+inline float pow_int(float x) {
+  static_assert(n >= 0);
+  if constexpr (n == 0) return 1;
+  else if constexpr (n % 2 == 0) return sqr(pow_int<n / 2>(x));
+  else return x * pow_int<n - 1>(x);
+}
 inline float radians(float degrees) { return degrees * pif / 180; }
 inline float degrees(float radians) { return radians * 180 / pif; }
 // Square root and arc sine clamped to their domain: round-off can push the

@@ -307,7 +307,7 @@ static trace_point eval_trace_point(const scene_data& scene, const trace_context
       // With the outgoing direction, so that the terms depending on it are
       // computed once for the three or four hair calls of this hit.
       point.hair = eval_hair_brdf(params.hair_per_hit
-                                      ? make_hair_precomputed(material.hair)
+                                      ? make_hair_precomputed(material.hair, params.hair_fast_pow)
                                       : context.hair[instance.material],
           fiber.h, fiber.frame, -ray.d);
     }

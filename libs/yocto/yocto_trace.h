@@ -40,6 +40,7 @@ struct trace_params {
   int                threads    = 0;     // 0 for all cores
   bool               hair_four_numbers = false;  // 4 independent numbers, no demux
   bool               hair_per_hit = false;  // material terms at every hit (as the thesis)
+  bool               hair_fast_pow = false;  // beta^20, beta^22 by squaring, not std::pow
 };
 
 }  // namespace yocto

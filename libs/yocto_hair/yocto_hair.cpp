@@ -173,7 +173,7 @@ vec3f hair_sigma_a_from_color(const vec3f& color, float beta_n) {
   return sigma_a;
 }
 
-hair_precomputed make_hair_precomputed(const hair_material& material) {
+hair_precomputed make_hair_precomputed(const hair_material& material, bool fast_pow) {
   auto pre = hair_precomputed{};
   // beta = 0 makes the variance 0 and every term NaN (pbrt-v3 issue #219).
   auto beta_m = std::clamp(material.beta_m, 0.01f, 1.0f);
@@ -201,7 +201,7 @@ hair_precomputed make_hair_precomputed(const hair_material& material) {
   // hair.pdf eq. 4 (Chiang 2016 eq. 7): variance of the R lobe; TT is
   // narrower, TRT and beyond wider.
   auto v0 = sqr(0.726f * beta_m + 0.812f * sqr(beta_m) +
-                3.7f * std::pow(beta_m, 20.0f));
+                3.7f * (fast_pow ? pow_int<20>(beta_m) : std::pow(beta_m, 20.0f)));
   pre.v[0] = v0;
   pre.v[1] = v0 / 4;
   pre.v[2] = 4 * v0;
@@ -214,7 +214,8 @@ hair_precomputed make_hair_precomputed(const hair_material& material) {
   // hair.pdf eq. 8 (Chiang 2016 eq. 8): logistic scale; 0.265 is the
   // published constant.
   pre.s = std::sqrt(pif / 8) * (0.265f * beta_n + 1.194f * sqr(beta_n) +
-                                   5.372f * std::pow(beta_n, 22.0f));
+                                   5.372f * (fast_pow ? pow_int<22>(beta_n)
+                                                      : std::pow(beta_n, 22.0f)));
   // Logistic CDF F(x) = 1 / (1 + e^{-x/s}); F(pi) - F(-pi) = tanh(pi / 2s).
   pre.n_scale   = 1 / std::tanh(pif / (2 * pre.s));
   pre.n_cdf_min = 1 / (1 + std::exp(pif / pre.s));

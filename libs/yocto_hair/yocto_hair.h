@@ -95,8 +95,11 @@ struct hair_brdf {
 };
 
 // Material terms: clamped roughness, variances, logistic scale, tilt sines
-// and cosines, and sigma_a chosen by the precedence above.
-hair_precomputed make_hair_precomputed(const hair_material& material);
+// and cosines, and sigma_a chosen by the precedence above. fast_pow: beta^20
+// and beta^22 by repeated squaring instead of std::pow (the thesis's
+// variant; the same values within float rounding).
+hair_precomputed make_hair_precomputed(
+    const hair_material& material, bool fast_pow = false);
 
 // Per-hit terms. frame: x = fiber tangent, z = shading normal facing the
 // outgoing direction, o unused; z is orthogonalised against x and y is

@@ -6,7 +6,7 @@
 # samples that rendering dominates loading.
 # Usage: scripts/bench/ab.sh N SCENE "ARGS A" "ARGS B" ...
 # ARGS may start with a yscene binary (a path containing "yscene"); the
-# default is build-bench/apps/yscene.
+# default is build/apps/yscene.
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 runs=$1; scene=$2; shift 2
@@ -15,7 +15,7 @@ declare -A times
 for ((r = 0; r < runs; r++)); do
   for variant in "${variants[@]}"; do
     read -r -a args <<< "$variant"
-    binary=build-bench/apps/yscene
+    binary=build/apps/yscene
     case "${args[0]}" in *yscene*) binary=${args[0]}; args=("${args[@]:1}") ;; esac
     TIMEFORMAT='%U %S'
     cpu=$( { time "$binary" render "$scene" -o out/bench/ab.pfm -q -t 1 "${args[@]}" \

@@ -5,8 +5,9 @@ One command renders every benchmark scene with every variant, measures time,
 samples/s, rays/s, peak memory and the error against a converged reference,
 and writes a CSV, log-log plots and a markdown report to docs/benchmark/:
 
-    python3 scripts/bench/run_bench.py            # full run, about 25 minutes
-    python3 scripts/bench/run_bench.py --quick    # small images, a few minutes
+    python3 scripts/bench/run_bench.py            # full run, 10-15 minutes
+    python3 scripts/bench/run_bench.py --quick    # small images, a few minutes,
+                                                  # into out/bench/quick-report
 
 Needs build/apps/yscene (bash scripts/setup.sh) and python3-matplotlib for
 the plots. Generated scenes, references and renders are cached under
@@ -59,6 +60,7 @@ VARIANTS = [
     ("flat", ["--flat-curves"], 1),
     ("four-numbers", ["--hair-four-numbers"], 1),
     ("per-hit", ["--hair-per-hit"], 1),
+    ("per-hit-fast-pow", ["--hair-per-hit", "--hair-fast-pow"], 1),
     ("path-2t", [], 2),
 ]
 # The 1M scene pays a long BVH build per run: only the main comparisons.
@@ -140,24 +142,50 @@ def image_errors(filename, reference):
 # -----------------------------------------------------------------------------
 
 
+def generate_scene(yscene, path, arguments):
+    """Generates a scene with `yscene hair ARGUMENTS` unless the scene there
+    was generated with exactly these arguments (a stamp file beside it)."""
+    stamp = os.path.join(os.path.dirname(path), "generated-with.txt")
+    wanted = " ".join(arguments)
+    if os.path.exists(path) and os.path.exists(stamp):
+        with open(stamp) as f:
+            if f.read().strip() == wanted:
+                return path
+    log(f"generating {os.path.relpath(path, ROOT)}: yscene hair {wanted}")
+    os.makedirs(os.path.dirname(path), exist_ok=True)
+    run([yscene, "hair"] + arguments + ["--output", path])
+    with open(stamp, "w") as f:
+        f.write(wanted + "\n")
+    return path
+
+
+def scene_fingerprint(path):
+    """What a cached reference depends on: the scene file and the sizes and
+    modification times of the files it references (shapes, textures)."""
+    parts = []
+    directory = os.path.dirname(path)
+    for sub in ("", "shapes", "textures"):
+        folder = os.path.join(directory, sub)
+        if not os.path.isdir(folder):
+            continue
+        for name in sorted(os.listdir(folder)):
+            file = os.path.join(folder, name)
+            if os.path.isfile(file) and not name.endswith(".txt"):
+                info = os.stat(file)
+                parts.append(f"{sub}/{name}:{info.st_size}:{int(info.st_mtime)}")
+    return ";".join(parts)
+
+
 def make_scenes(yscene):
-    if not all(os.path.exists(os.path.join(ROOT, path)) for _, path in SCENES[:3]):
-        log("generating the thesis scenes (scripts/make_scenes.sh)")
-        run(["bash", "scripts/make_scenes.sh"])
-    path = os.path.join(ROOT, SCENES[3][1])
-    if not os.path.exists(path):
-        log("generating the 1M-strand scene")
-        os.makedirs(os.path.dirname(path), exist_ok=True)
-        run([yscene, "hair"] + HAIR_1M + ["--output", path])
+    log("the thesis scenes (scripts/make_scenes.sh keeps existing ones)")
+    run(["bash", "scripts/make_scenes.sh"])
+    generate_scene(yscene, os.path.join(ROOT, SCENES[3][1]), HAIR_1M)
 
 
 def scale_scene(yscene, strands):
     path = os.path.join(ROOT, f"out/bench/scenes/scale-{strands}/scale-{strands}.json")
-    if not os.path.exists(path):
-        os.makedirs(os.path.dirname(path), exist_ok=True)
-        run([yscene, "hair", "--style", "straight", "--strands", str(strands),
-             "--segments", "4", "--output", path])
-    return path
+    return generate_scene(yscene, path, ["--style", "straight", "--strands", str(strands),
+                                         "--segments", "4"])
 
 
 def reference_spp(name, config):
@@ -171,7 +199,12 @@ def reference(yscene, name, path, config):
     spp = reference_spp(name, config)
     stem = f"{name}-r{config['resolution']}-{spp}spp"
     image, meta = os.path.join(directory, stem + ".pfm"), os.path.join(directory, stem + ".json")
-    if not (os.path.exists(image) and os.path.exists(meta)):
+    fingerprint = scene_fingerprint(path)
+    cached = os.path.exists(image) and os.path.exists(meta)
+    if cached:
+        with open(meta) as f:
+            cached = json.load(f).get("scene_fingerprint") == fingerprint
+    if not cached:
         log(f"{name}: rendering the reference at {spp} spp")
         load = load_average()
         output = run([yscene, "render", path, "--output", image, "--quiet", "--stats",
@@ -180,6 +213,7 @@ def reference(yscene, name, path, config):
                       "--threads", "0"])
         stats = parse_fields([l for l in output.splitlines() if l.startswith("stats")][0])
         stats["load"] = load
+        stats["scene_fingerprint"] = fingerprint
         with open(meta, "w") as f:
             json.dump(stats, f, indent=1)
     with open(meta) as f:
@@ -395,7 +429,8 @@ def write_report(out, config, results, limits, scales, pows, plots, command):
              "N line segments per Bezier segment; `flat` = ray-facing flat curves; "
              "`four-numbers` = four independent numbers instead of the demux; `per-hit` = "
              "the hair material terms (with its two std::pow calls) computed at every hit "
-             "as the thesis did; `path-2t` = `path` on two threads.", ""]
+             "as the thesis did; `per-hit-fast-pow` = the same with the fast integer power "
+             "instead of std::pow; `path-2t` = `path` on two threads.", ""]
     for name, data in results.items():
         rows, target, ref_meta = data["rows"], data["target"], data["reference"]
         lines += [f"## {name}", ""]
@@ -483,8 +518,9 @@ def write_report(out, config, results, limits, scales, pows, plots, command):
         lines += ["", "## The fast integer power", "",
                   "`tests/bench_pow.cpp`, median of 5 repetitions. The hair library calls "
                   "`std::pow(beta, 20)` and `std::pow(beta, 22)` in `make_hair_precomputed`, "
-                  "once per material per render; only the `per-hit` variant (the thesis's "
-                  "layout) pays them at every hit.", "",
+                  "once per material per render; only the `per-hit` variants (the thesis's "
+                  "layout) pay them at every hit, `per-hit-fast-pow` with the fast power "
+                  "(`--hair-fast-pow`).", "",
                   "| benchmark | ns per call |", "|---|---:|"]
         for r in pows:
             if "agreement" in r["benchmark"]:
@@ -529,7 +565,9 @@ def main():
     parser.add_argument("--quick", action="store_true",
                         help="small images and budgets, no 1M-strand scene (a few minutes)")
     parser.add_argument("--build", default="build", help="build directory (default build)")
-    parser.add_argument("--out", default="docs/benchmark", help="report directory")
+    parser.add_argument("--out", default="",
+                        help="report directory (default docs/benchmark, out/bench/quick-report "
+                        "with --quick)")
     parser.add_argument("--scenes", nargs="*", help="only these scenes")
     parser.add_argument("--report-only", action="store_true",
                         help="rewrite the report and plots from the CSVs of the last run")
@@ -546,7 +584,9 @@ def main():
                   "limit_spp": 2, "repeats": 3, "scale_strands": SCALE_STRANDS,
                   "scale_spp": 4, "scenes": 4}
     config["build"] = args.build
-    out = os.path.join(ROOT, args.out)
+    # A quick run never overwrites the committed report.
+    out = os.path.join(ROOT, args.out or ("out/bench/quick-report" if args.quick
+                                          else "docs/benchmark"))
     os.makedirs(out, exist_ok=True)
     command = "bash scripts/bench/run.sh" + (" --quick" if args.quick else "")
     start = time.time()
