@@ -501,7 +501,7 @@ int main(int argc, const char** argv) {
   render->add_option("--resolution,-r", params.resolution, "largest image side in pixels");
   render->add_option("--sampler", sampler, "path (MIS) or naive (BSDF sampling only)")
       ->check(CLI::IsMember({"path", "naive"}));
-  render->add_option("--bounces,-b", params.bounces, "maximum path length");
+  render->add_option("--bounces,-b", params.bounces, "maximum scattering events per path (pbrt's maxdepth)");
   render->add_option("--threads,-t", params.threads, "threads (0 = all cores)");
   render->add_option("--seed", params.seed, "random seed");
   render->add_option("--clamp", params.clamp, "clamp sample values (0 = off)");

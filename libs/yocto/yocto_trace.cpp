@@ -215,31 +215,44 @@ static float environment_texture_pdf(
   return prob * texture.width * texture.height / (2 * pif * pif * sin_theta);
 }
 
-// Samples a direction towards a light from a point; returns the direction (a
-// zero vector if the light has no area). For a textured environment, `uv` is
-// set to the sampled texture coordinates.
-static vec3f sample_light(const scene_data& scene, const trace_light& light,
-    const vec3f& position, float rel, const vec2f& ruv, vec2f& uv) {
+// A direction sampled towards a light. Area lights: the sampled point (its
+// distance, geometric normal and texture coordinates); textured environments:
+// the sampled texture coordinates.
+struct light_sample {
+  vec3f incoming = {0, 0, 0};  // zero if the light has no area
+  vec3f position = {0, 0, 0};  // area lights: the sampled point
+  float distance = flt_max;    // area lights: to the sampled point
+  vec3f gnormal  = {0, 0, 1};  // area lights: at the sampled point
+  vec2f uv       = {0, 0};     // area lights: texcoord; environments: equirect uv
+};
+
+static light_sample sample_light(const scene_data& scene, const trace_light& light,
+    const vec3f& position, float rel, const vec2f& ruv) {
+  auto sample = light_sample{};
   if (light.instance >= 0) {
     auto& instance = scene.instances[light.instance];
-    auto& shape    = scene.shapes[instance.shape];
     auto  element  = sample_discrete(light.cdf, rel);
-    auto  bary     = sample_triangle(ruv);
-    auto  t        = shape.triangles[element];
-    auto  p = (1 - bary.x - bary.y) * shape.positions[t.x] + bary.x * shape.positions[t.y] +
-             bary.y * shape.positions[t.z];
-    return safe_normalize(transform_point(instance.frame, p) - position);
+    auto  point    = eval_surface_point(scene, instance, element, sample_triangle(ruv));
+    sample.position = point.position;
+    sample.distance = length(point.position - position);
+    sample.incoming = safe_normalize(point.position - position);
+    sample.gnormal  = safe_normalize(point.gnormal);
+    sample.uv       = point.texcoord;
   } else if (light.environment >= 0) {
     auto& environment = scene.environments[light.environment];
-    if (environment.emission_tex < 0) return sample_sphere(ruv);
+    if (environment.emission_tex < 0) {
+      sample.incoming = sample_sphere(ruv);
+      return sample;
+    }
     auto& texture = scene.textures[environment.emission_tex];
     auto  index   = sample_discrete(light.cdf, rel);
-    uv = vec2f{((index % texture.width) + ruv.x) / texture.width,
+    sample.uv     = vec2f{((index % texture.width) + ruv.x) / texture.width,
         ((index / texture.width) + ruv.y) / texture.height};
-    return transform_direction(environment.frame, equirect_to_direction(uv));
+    sample.incoming = transform_direction(environment.frame, equirect_to_direction(sample.uv));
   } else {
-    return normalize(scene.distant_lights[light.distant].direction);
+    sample.incoming = normalize(scene.distant_lights[light.distant].direction);
   }
+  return sample;
 }
 
 }  // namespace yocto
@@ -249,28 +262,34 @@ static vec3f sample_light(const scene_data& scene, const trace_light& light,
 // -----------------------------------------------------------------------------
 namespace yocto {
 
-// Radiance of the environments along an escaping ray's direction and, if
-// `light_pdf` is not null, the pdf of sampling that direction by light
-// sampling (for MIS). As eval_environment, but with the world-to-local frames
-// inverted once per scene and the texture coordinates computed once for both.
+static float power_heuristic(float pdf_a, float pdf_b) {
+  auto a = pdf_a * pdf_a, b = pdf_b * pdf_b;
+  return a + b > 0 ? a / (a + b) : 0;
+}
+
+// Radiance of the environments along an escaping ray's direction, each
+// weighted for MIS against its own light-sampling pdf when bsdf_pdf > 0 (each
+// environment is a light of its own, so each has its own pair of weights). As
+// eval_environment, but with the world-to-local frames inverted once per
+// scene and the texture coordinates computed once for emission and pdf.
 static vec3f eval_environments(const scene_data& scene, const trace_context& context,
-    const vec3f& direction, float* light_pdf) {
+    const vec3f& direction, float bsdf_pdf) {
   auto radiance = vec3f{0, 0, 0};
-  auto pdf      = 0.0f;
+  auto nlights  = (float)std::max((int)context.lights.size(), 1);
   for (auto i = 0; i < (int)scene.environments.size(); i++) {
     auto& environment = scene.environments[i];
     auto  light       = context.environment_light[i];
-    if (environment.emission_tex < 0) {
-      radiance += environment.emission;
-      if (light >= 0) pdf += 1 / (4 * pif);
-      continue;
+    auto  mis_needed  = light >= 0 && bsdf_pdf > 0;
+    auto  emission    = environment.emission;
+    auto  light_pdf   = 1 / (4 * pif);
+    if (environment.emission_tex >= 0) {
+      auto local = transform_direction(context.environment_inverses[i], direction);
+      auto uv    = direction_to_equirect(local);
+      emission *= eval_texture(scene.textures[environment.emission_tex], uv);
+      if (mis_needed) light_pdf = environment_texture_pdf(scene, context.lights[light], uv);
     }
-    auto local = transform_direction(context.environment_inverses[i], direction);
-    auto uv    = direction_to_equirect(local);
-    radiance += environment.emission * eval_texture(scene.textures[environment.emission_tex], uv);
-    if (light >= 0 && light_pdf) pdf += environment_texture_pdf(scene, context.lights[light], uv);
+    radiance += emission * (mis_needed ? power_heuristic(bsdf_pdf, light_pdf / nlights) : 1.0f);
   }
-  if (light_pdf) *light_pdf = pdf / std::max((int)context.lights.size(), 1);
   return radiance;
 }
 
@@ -335,11 +354,6 @@ static ray3f spawn_ray(const trace_point& point, const vec3f& direction) {
   return {o, direction, 0, flt_max};
 }
 
-static float power_heuristic(float pdf_a, float pdf_b) {
-  auto a = pdf_a * pdf_a, b = pdf_b * pdf_b;
-  return a + b > 0 ? a / (a + b) : 0;
-}
-
 // Solid-angle pdf that light sampling would have produced for a BSDF ray that
 // hit an area light (at distance, with cosine at the light) or escaped.
 static float area_light_pdf(const scene_data& scene, const trace_context& context,
@@ -351,6 +365,9 @@ static float area_light_pdf(const scene_data& scene, const trace_context& contex
 }
 
 // The path tracer; when `record` is not null, every ray cast is appended to it.
+// A path scatters at most params.bounces times (pbrt's maxdepth): the ray
+// leaving the last scattering vertex is still traced for the emission it
+// finds, so that its MIS weight and the light sample's add up to one.
 static vec3f trace_path(const scene_data& scene, const scene_bvh& bvh,
     const trace_context& context, const ray3f& camera_ray, rng_state& rng,
     const trace_params& params, int64_t& rays, std::vector<trace_ray>* record) {
@@ -359,19 +376,12 @@ static vec3f trace_path(const scene_data& scene, const scene_bvh& bvh,
   auto ray       = camera_ray;
   auto bsdf_pdf  = 0.0f;  // pdf of the last BSDF sample, 0 for camera rays
   auto use_mis   = params.sampler == trace_sampler_type::path;
-  for (auto bounce = 0; bounce < params.bounces; bounce++) {
+  for (auto bounce = 0;; bounce++) {
     auto intersection = intersect_scene_bvh(bvh, ray);
     rays++;
     if (record) record->push_back({ray, false});
     if (!intersection.hit) {
-      auto mis_needed = use_mis && bsdf_pdf > 0;
-      auto light_pdf  = 0.0f;
-      auto emission   = eval_environments(
-          scene, context, ray.d, mis_needed ? &light_pdf : nullptr);
-      if (emission != vec3f{0, 0, 0}) {
-        auto mis = mis_needed ? power_heuristic(bsdf_pdf, light_pdf) : 1.0f;
-        radiance += weight * emission * mis;
-      }
+      radiance += weight * eval_environments(scene, context, ray.d, use_mis ? bsdf_pdf : 0);
       break;
     }
     auto point    = eval_trace_point(scene, context, intersection, ray, params);
@@ -385,16 +395,16 @@ static vec3f trace_path(const scene_data& scene, const scene_bvh& bvh,
       }
       radiance += weight * point.emission * mis;
     }
-    if (scatters_nothing(point)) break;
+    if (bounce >= params.bounces || scatters_nothing(point)) break;
 
     // Next-event estimation: one light, one shadow ray.
     if (use_mis && !context.lights.empty()) {
-      auto  nlights  = (int)context.lights.size();
-      auto& light    = context.lights[std::min(rand1i(rng, nlights), nlights - 1)];
-      auto  rel      = rand1f(rng);
-      auto  ruv      = rand2f(rng);
-      auto  light_uv = vec2f{0, 0};
-      auto  incoming = sample_light(scene, light, point.position, rel, ruv, light_uv);
+      auto  nlights = (int)context.lights.size();
+      auto& light   = context.lights[std::min(rand1i(rng, nlights), nlights - 1)];
+      auto  rel     = rand1f(rng);
+      auto  ruv     = rand2f(rng);
+      auto  sample  = sample_light(scene, light, point.position, rel, ruv);
+      auto  incoming = sample.incoming;
       // The BSDF is evaluated only for visible light samples, the shadow ray
       // skipped only where it is zero for certain.
       if (incoming != vec3f{0, 0, 0} && may_scatter(point, outgoing, incoming)) {
@@ -403,13 +413,18 @@ static vec3f trace_path(const scene_data& scene, const scene_bvh& bvh,
         auto pdf      = 0.0f;
         auto delta    = false;
         if (light.instance >= 0) {
-          auto hit = intersect_scene_bvh(bvh, shadow);
-          if (record) record->push_back({shadow, false});
-          if (hit.hit && hit.instance == light.instance) {
-            auto lpoint = eval_trace_point(scene, context, hit, shadow, params);
-            emission    = lpoint.emission;
-            pdf = area_light_pdf(scene, context, hit.instance, hit.distance,
-                std::abs(dot(lpoint.gnormal, incoming)));
+          // Visibility of the sampled point itself (stopping just short of
+          // it): a light may hide part of itself (a sphere's far side).
+          shadow.tmax = length(sample.position - shadow.o) * (1 - 1e-3f);
+          if (record) record->push_back({shadow, true});
+          auto& instance = scene.instances[light.instance];
+          auto& material = scene.materials[instance.material];
+          if (dot(sample.gnormal, incoming) < 0 && !intersect_scene_bvh_any(bvh, shadow)) {
+            emission = material.emission;
+            if (material.emission_tex >= 0)
+              emission *= eval_texture(scene.textures[material.emission_tex], sample.uv);
+            pdf = area_light_pdf(scene, context, light.instance, sample.distance,
+                -dot(sample.gnormal, incoming));
           }
         } else {
           if (record) record->push_back({shadow, true});
@@ -420,8 +435,8 @@ static vec3f trace_path(const scene_data& scene, const scene_bvh& bvh,
             auto& environment = scene.environments[light.environment];
             if (environment.emission_tex >= 0) {
               emission = environment.emission *
-                         eval_texture(scene.textures[environment.emission_tex], light_uv);
-              pdf = environment_texture_pdf(scene, light, light_uv) / nlights;
+                         eval_texture(scene.textures[environment.emission_tex], sample.uv);
+              pdf = environment_texture_pdf(scene, light, sample.uv) / nlights;
             } else {
               emission = environment.emission;
               pdf      = 1 / (4 * pif) / nlights;

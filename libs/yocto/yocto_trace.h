@@ -34,7 +34,7 @@ struct trace_params {
   int                resolution = 720;  // largest image side
   trace_sampler_type sampler    = trace_sampler_type::path;
   int                samples    = 64;
-  int                bounces    = 32;
+  int                bounces    = 32;    // scattering events per path (pbrt maxdepth)
   float              clamp      = 100;   // max sample value, 0 for none
   uint64_t           seed       = 961748941;
   int                threads    = 0;     // 0 for all cores
@@ -52,7 +52,7 @@ namespace yocto {
 
 // A light to sample: an emissive triangle instance (with a cdf over its
 // triangles' world areas), the environment (with a cdf over its texels,
-// weighted by sin(theta) and luminance) or a distant light.
+// weighted by sin(theta) and the texel's largest component) or a distant light.
 struct trace_light {
   int                instance    = -1;
   int                environment = -1;
