@@ -11,9 +11,9 @@ and writes a CSV, log-log plots and a markdown report to docs/benchmark/:
 
 Needs build/apps/yscene (bash scripts/setup.sh) and python3-matplotlib for
 the plots. Generated scenes, references and renders are cached under
-out/bench/ (git-ignored); references are rendered once per scene, resolution
-and sample count, with a seed different from the variants' so that their
-noise is independent.
+out/bench/ (git-ignored); references are rendered once per scene, resolution,
+sample count and yscene binary (a rebuilt renderer renders them again), with a
+seed different from the variants' so that their noise is independent.
 
 Timing: the machine may be shared, so single-thread variants are timed by
 render CPU time (what yscene reports as render_cpu) and the two-thread variant
@@ -22,6 +22,7 @@ by wall time; the load average is recorded with every measurement.
 
 import argparse
 import csv
+import hashlib
 import json
 import math
 import os
@@ -159,10 +160,12 @@ def generate_scene(yscene, path, arguments):
     return path
 
 
-def scene_fingerprint(path):
-    """What a cached reference depends on: the scene file and the sizes and
-    modification times of the files it references (shapes, textures)."""
-    parts = []
+def scene_fingerprint(path, yscene):
+    """What a cached reference depends on: the renderer (a digest of the yscene
+    binary), the scene file and the sizes and modification times of the files
+    it references (shapes, textures)."""
+    with open(yscene, "rb") as f:
+        parts = ["yscene:" + hashlib.sha1(f.read()).hexdigest()[:16]]
     directory = os.path.dirname(path)
     for sub in ("", "shapes", "textures"):
         folder = os.path.join(directory, sub)
@@ -199,7 +202,7 @@ def reference(yscene, name, path, config):
     spp = reference_spp(name, config)
     stem = f"{name}-r{config['resolution']}-{spp}spp"
     image, meta = os.path.join(directory, stem + ".pfm"), os.path.join(directory, stem + ".json")
-    fingerprint = scene_fingerprint(path)
+    fingerprint = scene_fingerprint(path, yscene)
     cached = os.path.exists(image) and os.path.exists(meta)
     if cached:
         with open(meta) as f:
