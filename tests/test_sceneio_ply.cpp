@@ -282,6 +282,15 @@ static void reports_wrong_counts_bad_indices_and_bad_values() {
       {"end_header\n0 0 0\n1 nan 1\n2 2 2\n", {"vertex", "index 1", "not finite"}},
       {"property float radius\nend_header\n0 0 0 1\n1 1 1 -1\n2 2 2 1\n",
           {"vertex", "index 1", "radius"}},
+      // Half a normal or texcoord group once wrote out of bounds.
+      {"property float nx\nproperty float u\nproperty float v\nend_header\n"
+       "0 0 0 7 0.1 0.2\n1 1 1 7 0.1 0.2\n2 2 2 7 0.1 0.2\n",
+          {"vertex", "property nx", "normal"}},
+      {"property float ny\nproperty float nz\nend_header\n0 0 0 0 1\n1 1 1 0 1\n2 2 2 0 1\n",
+          {"vertex", "property ny", "normal"}},
+      {"property float nx\nproperty float ny\nproperty float nz\nproperty float t\n"
+       "end_header\n0 0 0 0 0 1 5\n1 1 1 0 0 1 5\n2 2 2 0 0 1 5\n",
+          {"vertex", "property t", "texcoord"}},
   };
   // An element of empty rows takes no data: a huge count must not hang.
   write_file(dir.file("empty-rows.ply"),

@@ -504,24 +504,41 @@ static bool load_ply_shape(
           return false;
         }
       }
+      // A normal or texcoord group is all there or not at all: half a
+      // normal has no meaning.
+      for (auto group : {std::vector{ply_column::nx, ply_column::ny, ply_column::nz},
+               std::vector{ply_column::u, ply_column::v}}) {
+        auto present = 0;
+        for (auto c : group) present += has(c) ? 1 : 0;
+        if (present == 0 || present == (int)group.size()) continue;
+        for (auto p = 0; p < (int)columns.size(); p++) {
+          if (std::find(group.begin(), group.end(), (ply_column)columns[p]) == group.end())
+            continue;
+          error = filename + ": element vertex property " + element.properties[p].name +
+                  ": incomplete " + (group.size() == 3 ? "normal" : "texcoord") +
+                  " (" + (group.size() == 3 ? "nx ny nz" : "u v") + " needed)";
+          return false;
+        }
+      }
       // Each property is written straight to its place in the shape: no
       // intermediate columns for millions of vertices.
       static_assert(sizeof(vec3f) == 3 * sizeof(float) && sizeof(vec2f) == 2 * sizeof(float));
       shape.positions.resize(max_rows);
-      if (has(ply_column::nx) && has(ply_column::ny) && has(ply_column::nz))
-        shape.normals.resize(max_rows);
-      if (has(ply_column::u) && has(ply_column::v)) shape.texcoords.resize(max_rows);
+      if (has(ply_column::nx)) shape.normals.resize(max_rows);
+      if (has(ply_column::u)) shape.texcoords.resize(max_rows);
       if (has(ply_column::radius)) shape.radius.resize(max_rows);
       auto targets = std::vector<float*>(columns.size(), nullptr);
       auto strides = std::vector<size_t>(columns.size(), 0);
+      auto in      = [](int c, ply_column first, ply_column last) {
+        return c >= (int)first && c <= (int)last;
+      };
       for (size_t p = 0; p < columns.size(); p++) {
         auto c = columns[p];
-        if (c < 0) continue;
-        if (c <= (int)ply_column::z) {
+        if (in(c, ply_column::x, ply_column::z)) {
           targets[p] = (float*)shape.positions.data() + c, strides[p] = 3;
-        } else if (c <= (int)ply_column::nz && !shape.normals.empty()) {
+        } else if (in(c, ply_column::nx, ply_column::nz)) {
           targets[p] = (float*)shape.normals.data() + (c - (int)ply_column::nx), strides[p] = 3;
-        } else if (c <= (int)ply_column::v && !shape.texcoords.empty()) {
+        } else if (in(c, ply_column::u, ply_column::v)) {
           targets[p] = (float*)shape.texcoords.data() + (c - (int)ply_column::u), strides[p] = 2;
         } else if (c == (int)ply_column::radius) {
           targets[p] = shape.radius.data(), strides[p] = 1;
