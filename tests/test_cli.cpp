@@ -134,6 +134,39 @@ TEST(cli, unreadable_texture) {
   EXPECT_FALSE(fs::exists(dir / "out.png"));
 }
 
+TEST(cli, singular_frames_are_errors_not_embree_asserts) {
+  auto dir = make_test_dir("frames");
+  write_small_scene(dir);  // for shapes/sphere.ply
+  auto zero    = std::string("[0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 4]");
+  auto objects = std::string(R"("shapes": [{"name": "sphere", "uri": "shapes/sphere.ply"}],
+    "materials": [{"name": "grey", "color": [0.5, 0.5, 0.5]}],)");
+  write_file(dir / "camera.json", R"({"cameras": [{"name": "cam", "frame": )" + zero + "}]," +
+                                      objects + R"("instances": [{"shape": 0, "material": 0}]})");
+  write_file(dir / "instance.json",
+      "{" + objects + R"("instances": [{"name": "hair", "shape": 0, "material": 0, "frame": )" +
+          zero + "}]}");
+  write_file(dir / "scale.pbrt", "LookAt 0 0 5 0 0 0 0 1 0\nCamera \"perspective\"\nWorldBegin\n"
+                                 "AttributeBegin\nScale 0 0 0\nShape \"sphere\"\nAttributeEnd\n");
+  auto out = (dir / "out.png").string();
+  auto camera = run_yscene("render " + (dir / "camera.json").string() + " -o " + out + " -s 1 -r 8");
+  expect_failure(camera, "camera.json");
+  EXPECT_NE(camera.output.find("camera \"cam\": frame is singular"), std::string::npos)
+      << camera.output;
+  auto instance = run_yscene("info " + (dir / "instance.json").string());
+  expect_failure(instance, "instance.json");
+  EXPECT_NE(instance.output.find("instance \"hair\": frame is singular"), std::string::npos)
+      << instance.output;
+  for (auto command : {"render " + (dir / "scale.pbrt").string() + " -o " + out + " -s 1 -r 8",
+           "convert " + (dir / "scale.pbrt").string() + " " + (dir / "out.json").string(),
+           "info " + (dir / "scale.pbrt").string()}) {
+    auto result = run_yscene(command);
+    expect_failure(result, "scale.pbrt");
+    EXPECT_NE(result.output.find("frame is singular"), std::string::npos) << result.output;
+  }
+  EXPECT_FALSE(fs::exists(out));
+  EXPECT_FALSE(fs::exists(dir / "out.json"));
+}
+
 TEST(cli, unknown_output_extension) {
   auto dir = make_test_dir("extension");
   write_small_scene(dir);

@@ -127,7 +127,7 @@ TEST(pbrtio, lexical_details) {
       "Material \"hair\" \"float\teumelanin\" .3 \"float   beta_m\" [+.25] \"float alpha\" -0\n"
       "  \"float beta_n\" 1e-1\n"
       "AreaLightSource \"diffuse\" \"rgb L\" [1 2 3] \"bool twosided\" true\n"
-      "Shape \"sphere\" \"float radius\" 2\n"};
+      "Shape \"curve\" \"point3 P\" [0 0 0 0 0 1 0 0 2 0 0 3] \"float width\" .1\n"};
   ASSERT_TRUE(load_text(dir, text, scene, error)) << error;
   EXPECT_EQ(scene.settings.resolution, 300);
   EXPECT_FLOAT_EQ(scene.cameras[0].aspect, 1.5f);
@@ -386,19 +386,17 @@ TEST(pbrtio, hair_material_parameters_and_precedence) {
   auto scene    = scene_data{};
   auto error    = std::string{};
   auto warnings = std::vector<std::string>{};
-  auto text     = std::string{
-      "WorldBegin\n"
-      "Material \"hair\"\n"
-      "Shape \"sphere\"\n"  // pbrt default: eumelanin 1.3
-      "Material \"hair\" \"float pheomelanin\" 2 \"float eta\" 1.6\n"
-      "Shape \"sphere\"\n"
-      "Material \"hair\" \"rgb color\" [ .2 .8 .3 ] \"float eumelanin\" 5\n"
-      "Shape \"sphere\"\n"
-      "Material \"hair\" \"rgb sigma_a\" [ .1 .2 .3 ] \"rgb reflectance\" [ .5 .5 .5 ]\n"
-      "  \"float beta_m\" .1 \"float beta_n\" .9 \"float alpha\" 3\n"
-      "Shape \"sphere\"\n"
-      "Material \"hair\" \"rgb reflectance\" [ .4 .3 .2 ]\n"
-      "Shape \"sphere\"\n"};
+  // Hair needs curves: one short strand after each material.
+  auto curve = std::string{
+      "Shape \"curve\" \"point3 P\" [0 0 0 0 0 1 0 0 2 0 0 3] \"float width\" .1\n"};
+  auto text = "WorldBegin\n"
+              "Material \"hair\"\n" +
+              curve +  // pbrt default: eumelanin 1.3
+              "Material \"hair\" \"float pheomelanin\" 2 \"float eta\" 1.6\n" + curve +
+              "Material \"hair\" \"rgb color\" [ .2 .8 .3 ] \"float eumelanin\" 5\n" + curve +
+              "Material \"hair\" \"rgb sigma_a\" [ .1 .2 .3 ] \"rgb reflectance\" [ .5 .5 .5 ]\n"
+              "  \"float beta_m\" .1 \"float beta_n\" .9 \"float alpha\" 3\n" +
+              curve + "Material \"hair\" \"rgb reflectance\" [ .4 .3 .2 ]\n" + curve;
   ASSERT_TRUE(load_text(dir, text, scene, error, &warnings)) << error;
   ASSERT_EQ(scene.materials.size(), 5u);
   auto& h0 = scene.materials[0].hair;

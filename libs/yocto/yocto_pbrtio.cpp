@@ -1810,6 +1810,12 @@ bool load_pbrt_scene(const std::string& filename, scene_data& scene, std::string
     for (auto& shape : scene.shapes)
       if (!shape.curves.empty()) shape = curves_to_lines(shape, params.segments);
   }
+  // What the directives cannot see alone, e.g. a Scale 0 0 0 instance.
+  if (!validate_scene(scene, error)) {
+    error = filename + ": " + error;
+    scene = {};
+    return false;
+  }
   return true;
 }
 
@@ -2094,6 +2100,11 @@ bool load_hair_scene(const std::string& filename, scene_data& scene, std::string
   scene.environments.push_back({identity3x4f, {1, 1, 1}, -1});
   scene.environment_names.push_back("sky");
   add_missing_camera(scene);
+  if (!validate_scene(scene, error)) {
+    error = filename + ": " + error;
+    scene = {};
+    return false;
+  }
   return true;
 }
 

@@ -158,8 +158,29 @@ static std::string element_name(const std::vector<std::string>& names, int index
   return std::string(kind) + " " + std::to_string(index);
 }
 
+// A frame must be finite and invertible: Embree asserts on a singular
+// instance, and a camera or environment with one maps every direction to
+// zero. Singular is relative to the axes' lengths, so tiny scales pass.
+static bool check_frame(const frame3f& frame, const std::string& name, std::string& error) {
+  if (!isfinite(frame.x) || !isfinite(frame.y) || !isfinite(frame.z) || !isfinite(frame.o)) {
+    error = name + ": frame is not finite";
+    return false;
+  }
+  auto x = glm::dvec3(frame.x), y = glm::dvec3(frame.y), z = glm::dvec3(frame.z);
+  auto det = std::abs(glm::dot(x, glm::cross(y, z)));
+  if (!(det > 1e-12 * glm::length(x) * glm::length(y) * glm::length(z))) {
+    error = name + ": frame is singular";
+    return false;
+  }
+  return true;
+}
+
 bool validate_scene(const scene_data& scene, std::string& error) {
   auto num_textures = (int)scene.textures.size();
+  for (auto i = 0; i < (int)scene.cameras.size(); i++) {
+    if (!check_frame(scene.cameras[i].frame, element_name(scene.camera_names, i, "camera"), error))
+      return false;
+  }
   for (auto i = 0; i < (int)scene.shapes.size(); i++) {
     auto& shape = scene.shapes[i];
     auto  name  = element_name(scene.shape_names, i, "shape");
@@ -196,6 +217,9 @@ bool validate_scene(const scene_data& scene, std::string& error) {
     }
   }
   for (auto i = 0; i < (int)scene.environments.size(); i++) {
+    if (!check_frame(scene.environments[i].frame,
+            element_name(scene.environment_names, i, "environment"), error))
+      return false;
     auto tex = scene.environments[i].emission_tex;
     if (tex < -1 || tex >= num_textures) {
       error = element_name(scene.environment_names, i, "environment") +
@@ -206,6 +230,7 @@ bool validate_scene(const scene_data& scene, std::string& error) {
   for (auto i = 0; i < (int)scene.instances.size(); i++) {
     auto& instance = scene.instances[i];
     auto  name     = element_name(scene.instance_names, i, "instance");
+    if (!check_frame(instance.frame, name, error)) return false;
     if (instance.shape < 0 || instance.shape >= (int)scene.shapes.size()) {
       error = name + ": shape reference " + std::to_string(instance.shape) + " out of range";
       return false;

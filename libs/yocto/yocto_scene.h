@@ -218,7 +218,8 @@ shape_data make_quad_shape(const vec2f& size);
 void append_catmull_rom_strand(shape_data& shape, const std::vector<vec3f>& points,
     const std::vector<float>& radii);
 
-// Checks references and sizes; returns false with a message naming the element.
+// Checks references, sizes and frames (finite, invertible); returns false
+// with a message naming the element.
 bool validate_scene(const scene_data& scene, std::string& error);
 
 // Adds a default camera framing the scene bounds if the scene has none.
