@@ -813,6 +813,27 @@ TEST(pbrtio, bad_input_names_file_line_and_directive) {
   expect_error(dir, "WorldBegin\nMaterial \"hair\" \"float beta_m\" 2\n", {"beta_m"});
 }
 
+TEST(pbrtio, hair_material_on_a_surface_is_an_error_at_the_shape) {
+  auto dir = temp_dir{};
+  write_text(dir / "tri.ply",
+      "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+      "property float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n"
+      "0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n");
+  auto shapes = std::vector<std::string>{"\"sphere\"", "\"disk\"",
+      "\"trianglemesh\" \"point3 P\" [0 0 0 1 0 0 0 1 0] \"integer indices\" [0 1 2]",
+      "\"plymesh\" \"string filename\" \"tri.ply\""};
+  for (auto& shape : shapes) {
+    auto type = shape.substr(0, shape.find('"', 1) + 1);
+    expect_error(dir,
+        "WorldBegin\nMaterial \"hair\"\nAttributeBegin\nShape " + shape + "\nAttributeEnd\n",
+        {"scene.pbrt:4:", "Shape " + type, "a hair material needs curves"});
+    expect_error(dir,
+        "WorldBegin\nMakeNamedMaterial \"fur\" \"string type\" \"hair\"\n"
+        "NamedMaterial \"fur\"\nShape " + shape + "\n",
+        {"scene.pbrt:4:", "Shape " + type, "a hair material needs curves"});
+  }
+}
+
 TEST(pbrtio, unknown_directives_are_warnings_when_lenient) {
   auto dir      = temp_dir{};
   auto scene    = scene_data{};

@@ -1194,8 +1194,16 @@ static bool parse_light_source(pbrt_state& state) {
 // -----------------------------------------------------------------------------
 namespace yocto {
 
+// Adds the shape with the current material and transform; -1 with the error
+// set if the material cannot go on it (hair on a surface).
 static int add_shape_instance(pbrt_state& state, shape_data&& shape, const char* kind) {
   auto& scene = *state.scene;
+  // The hair BSDF has no meaning on a surface; say so at the Shape's line.
+  if (!shape.triangles.empty() &&
+      state.materials[state.graphics.material].type == material_type::hair) {
+    set_error(state, "a hair material needs curves");
+    return -1;
+  }
   auto  name  = std::string{kind} + std::to_string(scene.shapes.size() + 1);
   scene.shapes.push_back(std::move(shape));
   scene.shape_names.push_back(name);
@@ -1420,7 +1428,7 @@ static bool parse_triangle_mesh(pbrt_state& state) {
       shape.texcoords.push_back({(*uvs)[2 * i], (*uvs)[2 * i + 1]});
   }
   add_shape_instance(state, std::move(shape), "mesh");
-  return true;
+  return state.error.empty();
 }
 
 static bool parse_shape(pbrt_state& state) {
