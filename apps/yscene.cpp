@@ -446,6 +446,13 @@ static int run_hair(const hair_options& options, hair_style_params params,
   auto is_pbrt   = extension == ".pbrt" ||
                  (output.size() > 8 && output.substr(output.size() - 8) == ".pbrt.gz");
   auto strands   = (size_t)0, segments = (size_t)0;
+  // Shapes index their vertices with int: refuse before allocating.
+  auto points = (int64_t)params.strands * (3 * (int64_t)hair_strand_segments(params) + 1);
+  if (points >= (int64_t)INT32_MAX)
+    return print_error(output + ": " + std::to_string(params.strands) + " strands of " +
+                       std::to_string(hair_strand_segments(params)) + " segments need " +
+                       std::to_string(points) + " control points, more than the " +
+                       std::to_string(INT32_MAX - 1) + " a shape can index");
   if (!options.fit_camera.empty() && extension == ".json")
     return print_error("--fit-camera places stand-in strands: use a .pbrt, .pbrt.gz, .hair or .ply output");
   if (extension == ".json") {
@@ -486,7 +493,7 @@ static int run_hair(const hair_options& options, hair_style_params params,
 // MAIN
 // -----------------------------------------------------------------------------
 
-int main(int argc, const char** argv) {
+static int run_main(int argc, const char** argv) {
   auto app = CLI::App{"yscene: render, inspect and convert hair scenes"};
   app.require_subcommand(1);
 
@@ -614,4 +621,15 @@ int main(int argc, const char** argv) {
     return run_convert(convert_in, convert_out, pbrt);
   }
   return 1;
+}
+
+// Whatever escapes (a huge scene's allocation) is one error line, not an abort.
+int main(int argc, const char** argv) {
+  try {
+    return run_main(argc, argv);
+  } catch (const std::bad_alloc&) {
+    return print_error("out of memory");
+  } catch (const std::exception& e) {
+    return print_error(e.what());
+  }
 }

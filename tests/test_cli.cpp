@@ -216,6 +216,19 @@ TEST(cli, outputs_go_into_new_directories_or_fail_before_the_work) {
   EXPECT_EQ(result.output.find("rays/s"), std::string::npos) << result.output;
 }
 
+TEST(cli, hair_counts_beyond_int_indices_are_errors_before_allocating) {
+  auto dir = make_test_dir("hair-count");
+  // 50M strands of 1000 segments: 1.5e11 control points, which once threw
+  // bad_alloc. (Counts just past 2^31 are not tried: should the check
+  // regress, they would allocate tens of gigabytes.)
+  auto output = (dir / "h.ply").string();
+  auto result = run_yscene("hair --strands 50000000 --segments 1000 -o " + output);
+  expect_failure(result, "h.ply");
+  EXPECT_NE(result.output.find("150050000000 control points"), std::string::npos)
+      << result.output;
+  EXPECT_TRUE(list_files(dir).empty());
+}
+
 TEST(cli, threads_one_and_two_give_the_same_image) {
   auto dir = make_test_dir("threads");
   ASSERT_EQ(run_yscene("hair --style curly --strands 200 -o " + (dir / "hair.json").string()).status, 0);

@@ -110,12 +110,16 @@ static std::vector<vec3f> make_block_fiber(rng_state& rng, int index, int count,
   return points;
 }
 
+int hair_strand_segments(const hair_style_params& params) {
+  auto defaults = std::array<int, 4>{8, 24, 40, 1};
+  return params.segments > 0 ? params.segments : defaults[(int)params.style];
+}
+
 shape_data make_hair_strands(const hair_style_params& params) {
   auto shape    = shape_data{};
-  auto defaults = std::array<int, 4>{8, 24, 40, 1};
   auto radii    = std::array<float, 4>{0.012f, 0.01f, 0.008f, 0.003f};
   auto style    = (int)params.style;
-  auto segments = params.segments > 0 ? params.segments : defaults[style];
+  auto segments = hair_strand_segments(params);
   auto radius   = params.radius > 0 ? params.radius : radii[style];
   auto npoints  = segments + 1;
   shape.positions.reserve((size_t)params.strands * (3 * segments + 1));

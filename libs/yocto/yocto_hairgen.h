@@ -37,8 +37,12 @@ struct hair_style_params {
   uint64_t   seed     = 7;
 };
 
+// Bezier segments per strand: the parameter, or the style's default.
+int hair_strand_segments(const hair_style_params& params);
+
 // Strands as a curves shape: each strand is a chain of cubic Bezier segments
 // sharing end points, radius tapering from the root to 20% at the tip.
+// strands * (3 segments + 1) control points.
 shape_data make_hair_strands(const hair_style_params& params);
 
 // The sphere the head styles grow from (center and radius).
