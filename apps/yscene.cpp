@@ -95,8 +95,17 @@ static bool load_any_scene(const std::string& filename, scene_data& scene,
 // RENDER
 // -----------------------------------------------------------------------------
 
+// The first Ctrl-C asks the render to stop after its pass; a second one,
+// while that pass or loading still runs, ends the program as usual.
 static std::atomic<bool> interrupted = false;
-static void handle_sigint(int) { interrupted = true; }
+static void handle_sigint(int) {
+  if (interrupted) {
+    std::signal(SIGINT, SIG_DFL);
+    std::raise(SIGINT);
+    return;
+  }
+  interrupted = true;
+}
 
 struct render_options {
   std::string scene    = "";
