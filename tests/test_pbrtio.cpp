@@ -834,6 +834,41 @@ TEST(pbrtio, hair_material_on_a_surface_is_an_error_at_the_shape) {
   }
 }
 
+TEST(pbrtio, reverse_orientation_turns_area_lights_and_twosided_warns_once) {
+  auto dir      = temp_dir{};
+  auto scene    = scene_data{};
+  auto error    = std::string{};
+  auto warnings = std::vector<std::string>{};
+  auto mesh     = std::string{
+      "Shape \"trianglemesh\" \"point3 P\" [0 0 0 1 0 0 0 1 0] \"integer indices\" [0 1 2]"
+      " \"normal N\" [0 0 1 0 0 1 0 0 1]\n"};
+  auto text = "WorldBegin\nAttributeBegin\nAreaLightSource \"diffuse\" \"bool twosided\" true\n" +
+              mesh +  // front: +z
+              "ReverseOrientation\n" + mesh +  // reversed: -z
+              "AttributeBegin\nReverseOrientation\n" + mesh +  // twice: +z
+              "AttributeEnd\nAttributeEnd\n"
+              "AttributeBegin\nAreaLightSource \"diffuse\" \"bool twosided\" true\n" + mesh +
+              "AttributeEnd\n";
+  ASSERT_TRUE(load_text(dir, text, scene, error, &warnings)) << error;
+  ASSERT_EQ(scene.shapes.size(), 4u);
+  auto expected = std::vector<std::pair<vec3i, float>>{
+      {{0, 1, 2}, 1}, {{0, 2, 1}, -1}, {{0, 1, 2}, 1}, {{0, 1, 2}, 1}};
+  for (auto i = 0; i < 4; i++) {
+    EXPECT_EQ(scene.shapes[i].triangles[0], expected[i].first) << i;
+    EXPECT_EQ(scene.shapes[i].normals[0].z, expected[i].second) << i;
+  }
+  auto twosided = 0;
+  for (auto& warning : warnings) twosided += contains(warning, "twosided") ? 1 : 0;
+  EXPECT_EQ(twosided, 1);
+  EXPECT_TRUE(any_contains(warnings, "scene.pbrt:3: AreaLightSource \"diffuse\": twosided "
+                                     "area lights emit from the front side only"));
+  // A one-sided light gives no warning.
+  warnings.clear();
+  ASSERT_TRUE(load_text(dir, "WorldBegin\nAreaLightSource \"diffuse\" \"bool twosided\" false\n" +
+                                 mesh, scene, error, &warnings)) << error;
+  EXPECT_FALSE(any_contains(warnings, "twosided"));
+}
+
 TEST(pbrtio, unknown_directives_are_warnings_when_lenient) {
   auto dir      = temp_dir{};
   auto scene    = scene_data{};

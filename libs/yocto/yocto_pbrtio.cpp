@@ -407,6 +407,7 @@ struct pbrt_graphics_state {
   frame3f ctm      = identity3x4f;
   int     material = 0;  // index into pbrt_state::materials
   vec3f   emission = {0, 0, 0};
+  bool    reverse_orientation = false;  // ReverseOrientation: area lights emit backwards
 };
 
 struct pbrt_stack_entry {
@@ -1204,6 +1205,12 @@ static int add_shape_instance(pbrt_state& state, shape_data&& shape, const char*
     set_error(state, "a hair material needs curves");
     return -1;
   }
+  // An area light emits on its front (counter-clockwise) side, pbrt's
+  // normal side; ReverseOrientation turns it round.
+  if (state.graphics.reverse_orientation && state.graphics.emission != vec3f{0, 0, 0}) {
+    for (auto& triangle : shape.triangles) std::swap(triangle.y, triangle.z);
+    for (auto& normal : shape.normals) normal = -normal;
+  }
   auto  name  = std::string{kind} + std::to_string(scene.shapes.size() + 1);
   scene.shapes.push_back(std::move(shape));
   scene.shape_names.push_back(name);
@@ -1676,7 +1683,9 @@ static bool parse_directive(pbrt_state& state, std::string_view directive) {
     if (!with_type("an area light type") || !parse_params(state)) return false;
     if (state.type == "diffuse") {
       state.graphics.emission = get_rgb(state, "L", {1, 1, 1}) * get_light_scale(state);
-      get_bool(state, "twosided", false);
+      if (get_bool(state, "twosided", false))
+        warn_once(state, "twosided", directive_name(state) +
+                                         ": twosided area lights emit from the front side only");
     } else {
       warn_once(state, "arealight", directive_name(state) + ": area light type not supported");
       for (auto i = 0; i < state.list.count; i++) state.list.items[i].used = true;
@@ -1706,8 +1715,10 @@ static bool parse_directive(pbrt_state& state, std::string_view directive) {
   } else if (directive == "WorldBegin") {
     state.graphics.ctm               = identity3x4f;
     state.coordinate_systems["world"] = identity3x4f;
-  } else if (directive == "WorldEnd" || directive == "ReverseOrientation") {
-    // Nothing to do: the end of the file ends the world, orientation is unused.
+  } else if (directive == "ReverseOrientation") {
+    state.graphics.reverse_orientation = !state.graphics.reverse_orientation;
+  } else if (directive == "WorldEnd") {
+    // Nothing to do: the end of the file ends the world.
   } else if (directive == "ActiveTransform") {
     auto token = pbrt_token{};
     if (!next_token(*state.lexer, token, state.error)) return false;
