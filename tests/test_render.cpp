@@ -5,10 +5,13 @@
 //
 
 #include <gtest/gtest.h>
+#include <unistd.h>
 #include <yocto/yocto_hairgen.h>
 #include <yocto/yocto_trace.h>
 
 #include <cmath>
+#include <filesystem>
+#include <fstream>
 
 using namespace yocto;
 
@@ -165,4 +168,31 @@ TEST(render, generator_is_deterministic_and_strands_are_chained) {
     auto tip  = a.radius[a.curves[s * per_strand + per_strand - 1].w];
     EXPECT_NEAR(tip / root, 0.2f, 1e-5f);
   }
+}
+
+TEST(render, pbrt_curves_are_written_through_a_unique_temporary) {
+  // Another writer's temporary under the old fixed name (filename + ".tmp")
+  // must be neither used nor removed.
+  auto dir = std::filesystem::temp_directory_path() /
+             ("yocto-render-tmp-" + std::to_string(getpid()));
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  auto params    = hair_style_params{};
+  params.strands = 3;
+  auto shape     = make_hair_strands(params);
+  for (auto name : {"h.pbrt", "h.pbrt.gz"}) {
+    auto filename = (dir / name).string();
+    std::ofstream(filename + ".tmp") << "another writer";
+    auto error = std::string{};
+    EXPECT_TRUE(save_pbrt_curves(filename, shape, error)) << error;
+    EXPECT_TRUE(std::filesystem::is_regular_file(filename)) << filename;
+    auto other = std::ifstream(filename + ".tmp");
+    auto text  = std::string(std::istreambuf_iterator<char>(other), {});
+    EXPECT_EQ(text, "another writer") << filename;
+  }
+  // Only the outputs and the other writer's files: no temporary left.
+  auto count = 0;
+  for (auto& entry : std::filesystem::directory_iterator(dir)) count += entry.exists();
+  EXPECT_EQ(count, 4);
+  std::filesystem::remove_all(dir);
 }

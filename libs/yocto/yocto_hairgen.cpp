@@ -11,6 +11,7 @@
 #include <memory>
 
 #include "yocto_sampling.h"
+#include "yocto_sceneio.h"
 
 // -----------------------------------------------------------------------------
 // STRANDS
@@ -274,7 +275,9 @@ namespace yocto {
 bool save_pbrt_curves(const std::string& filename, const shape_data& shape,
     std::string& error) {
   auto gzipped = filename.size() > 3 && filename.substr(filename.size() - 3) == ".gz";
-  auto temporary = filename + ".tmp";
+  // A name unique to this process and call, as sceneio's saves: concurrent
+  // writers of the same output never share (and clobber) a temporary.
+  auto temporary = make_temporary_filename(filename);
   auto file = gzopen(temporary.c_str(), gzipped ? "wb6" : "wbT");
   if (!file) return error = filename + ": cannot open for writing", false;
   auto ok   = true;
