@@ -114,6 +114,26 @@ TEST(camera, center_ray_looks_down_minus_z_and_corners_match_the_field_of_view) 
   EXPECT_EQ(camera_resolution(camera, 640), (vec2i{640, 320}));
 }
 
+TEST(texture, environment_lookups_clamp_v_and_wrap_u) {
+  // Top row 1, bottom row 0; left column brighter in the top row so that
+  // wrapping in u shows.
+  auto texture   = texture_data{2, 2, {{1, 1, 1}, {1, 1, 1}, {0, 0, 0}, {0, 0, 0}}};
+  // At the poles the environment sees one row, not a blend of both.
+  EXPECT_EQ(eval_environment_texture(texture, {0.3f, 0}), (vec3f{1, 1, 1}));
+  EXPECT_EQ(eval_environment_texture(texture, {0.3f, 1}), (vec3f{0, 0, 0}));
+  EXPECT_EQ(eval_environment_texture(texture, {0.3f, -0.2f}), (vec3f{1, 1, 1}));
+  // Surface textures still wrap in v: half of each row at the seam.
+  EXPECT_EQ(eval_texture(texture, {0.3f, 0}), (vec3f{0.5f, 0.5f, 0.5f}));
+  // u wraps for both: at u = 0 the first and last columns are blended.
+  auto columns = texture_data{2, 1, {{1, 1, 1}, {0, 0, 0}}};
+  EXPECT_EQ(eval_environment_texture(columns, {0, 0.5f}), (vec3f{0.5f, 0.5f, 0.5f}));
+  // Through the scene: straight up is v = 0, the top row.
+  auto scene = scene_data{};
+  scene.textures.push_back(texture);
+  scene.environments.push_back({identity3x4f, {1, 1, 1}, 0});
+  EXPECT_EQ(eval_environment(scene, scene.environments[0], {0, 1, 0}), (vec3f{1, 1, 1}));
+}
+
 TEST(camera, project_camera_point_inverts_eval_camera) {
   // A rotated portrait and a landscape camera; points along camera rays at
   // several depths project back to the rays' image coordinates (1e-5).

@@ -66,20 +66,33 @@ vec2f project_camera_point(const camera_data& camera, const vec3f& point) {
 // -----------------------------------------------------------------------------
 namespace yocto {
 
-vec3f eval_texture(const texture_data& texture, const vec2f& uv) {
+// Bilinear lookup, pixel centers at half-integers; u always wraps, v wraps
+// or is clamped to the first and last rows.
+static vec3f eval_texture(const texture_data& texture, const vec2f& uv, bool clamp_v) {
   if (texture.width <= 0 || texture.height <= 0) return {1, 1, 1};
-  // Bilinear lookup with wrapping; pixel centers at half-integers.
   auto s  = (uv.x - std::floor(uv.x)) * texture.width - 0.5f;
-  auto t  = (uv.y - std::floor(uv.y)) * texture.height - 0.5f;
+  auto t  = (clamp_v ? std::clamp(uv.y, 0.0f, 1.0f) : uv.y - std::floor(uv.y)) *
+               texture.height - 0.5f;
   auto i  = (int)std::floor(s), j = (int)std::floor(t);
   auto fu = s - i, fv = t - j;
   auto wrap_i = [&](int x) { return ((x % texture.width) + texture.width) % texture.width; };
-  auto wrap_j = [&](int y) { return ((y % texture.height) + texture.height) % texture.height; };
+  auto wrap_j = [&](int y) {
+    if (clamp_v) return std::clamp(y, 0, texture.height - 1);
+    return ((y % texture.height) + texture.height) % texture.height;
+  };
   auto at = [&](int x, int y) {
     return texture.pixels[(size_t)wrap_j(y) * texture.width + wrap_i(x)];
   };
   return at(i, j) * (1 - fu) * (1 - fv) + at(i + 1, j) * fu * (1 - fv) +
          at(i, j + 1) * (1 - fu) * fv + at(i + 1, j + 1) * fu * fv;
+}
+
+vec3f eval_texture(const texture_data& texture, const vec2f& uv) {
+  return eval_texture(texture, uv, false);
+}
+
+vec3f eval_environment_texture(const texture_data& texture, const vec2f& uv) {
+  return eval_texture(texture, uv, true);
 }
 
 // Yocto/GL's equirectangular convention: u = atan2(z, x) / 2pi, v = acos(y)/pi.
@@ -98,7 +111,8 @@ vec3f eval_environment(const scene_data& scene, const environment_data& environm
   if (environment.emission_tex < 0) return environment.emission;
   auto local = transform_direction(inverse(environment.frame, false), direction);
   return environment.emission *
-         eval_texture(scene.textures[environment.emission_tex], direction_to_equirect(local));
+         eval_environment_texture(
+             scene.textures[environment.emission_tex], direction_to_equirect(local));
 }
 
 }  // namespace yocto

@@ -144,6 +144,9 @@ vec2i camera_resolution(const camera_data& camera, int resolution);
 
 // Texture lookup with bilinear filtering and wrapping; uv in [0,1]^2.
 vec3f eval_texture(const texture_data& texture, const vec2f& uv);
+// The same for an equirectangular map: u wraps around the horizon, v is
+// clamped, so that the poles (v = 0 and 1) do not blend into each other.
+vec3f eval_environment_texture(const texture_data& texture, const vec2f& uv);
 
 // Environment radiance arriving from direction (pointing away from the scene).
 vec3f eval_environment(const scene_data& scene, const environment_data& environment,
