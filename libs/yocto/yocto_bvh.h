@@ -8,7 +8,7 @@
 // level less, the common case of hair scenes); others are Embree instances of
 // a per-shape scene. Intersections return the instance, the
 // element and Embree's parametric coordinates; fiber geometry at a hit (tangent,
-// radius, signed offset h) is computed by `eval_fiber_hit` in yocto_scene.
+// radius, signed offset h) is computed by `eval_fiber_point` in yocto_scene.
 //
 
 #ifndef YOCTO_BVH_H_

@@ -1,8 +1,8 @@
 //
 // # Yocto/Scene: the scene model
 //
-// Only what hair scenes need: perspective cameras, one environment (constant or
-// image), shapes made of triangles, line segments or cubic Bezier curves with a
+// Only what hair scenes need: perspective or orthographic cameras, one
+// environment (constant or image), shapes made of triangles, line segments or cubic Bezier curves with a
 // per-vertex radius, materials `matte`, `glossy` and `hair`, and instances that
 // place a shape with a material. Elements refer to each other by index (-1 is
 // none). Names live in parallel `*_names` arrays, as in Yocto/GL.
@@ -24,8 +24,9 @@
 // -----------------------------------------------------------------------------
 namespace yocto {
 
-// Perspective camera looking along -z of its frame. Lens, film and focus in
-// meters as Yocto/GL; aspect is width over height.
+// Camera looking along -z of its frame: perspective (pinhole or thin lens),
+// or orthographic with the film scaled by focus / lens. Lens, film and focus
+// in meters as Yocto/GL; aspect is width over height.
 struct camera_data {
   frame3f frame        = identity3x4f;
   bool    orthographic = false;
