@@ -4,8 +4,9 @@
 // Only what hair scenes need: perspective or orthographic cameras, one
 // environment (constant or image), shapes made of triangles, line segments or
 // cubic Bezier curves with a per-vertex radius, materials `matte`, `glossy` and
-// `hair`, and instances that place a shape with a material. Elements refer to each other by index (-1 is
-// none). Names live in parallel `*_names` arrays, as in Yocto/GL.
+// `hair`, and instances that place a shape with a material. Elements refer to
+// each other by index (-1 is none). Names live in parallel `*_names` arrays, as
+// in Yocto/GL.
 //
 
 #ifndef YOCTO_SCENE_H_
