@@ -148,7 +148,8 @@ TEST(cli, singular_frames_are_errors_not_embree_asserts) {
   write_file(dir / "scale.pbrt", "LookAt 0 0 5 0 0 0 0 1 0\nCamera \"perspective\"\nWorldBegin\n"
                                  "AttributeBegin\nScale 0 0 0\nShape \"sphere\"\nAttributeEnd\n");
   auto out = (dir / "out.png").string();
-  auto camera = run_yscene("render " + (dir / "camera.json").string() + " -o " + out + " -s 1 -r 8");
+  auto camera =
+      run_yscene("render " + (dir / "camera.json").string() + " -o " + out + " -s 1 -r 8");
   expect_failure(camera, "camera.json");
   EXPECT_NE(camera.output.find("camera \"cam\": frame is singular"), std::string::npos)
       << camera.output;
