@@ -267,3 +267,27 @@ TEST(trace, one_bounce_is_direct_light_for_both_samplers) {
   EXPECT_GT(naive_mean, 0.05);
   EXPECT_NEAR(path_mean / naive_mean, 1, 0.03) << path_mean << " " << naive_mean;
 }
+
+TEST(trace, sky_seen_at_the_pole_is_the_top_row) {
+  // An empty scene under a 4x2 sky, top row 1 and bottom row 0, seen by a
+  // camera looking straight up with a narrow field (v < 0.02 everywhere):
+  // every pixel is 1. Wrapping v at the pole blended in the bottom row
+  // (about 0.5 here). 8x8 pixels, 4 spp, both samplers.
+  auto scene  = scene_data{};
+  auto camera = camera_data{};
+  camera.frame  = lookat_frame({0, 0, 0}, {0, 1, 0}, {0, 0, 1});
+  camera.aspect = 1;
+  camera.film   = 0.002f;
+  scene.cameras.push_back(camera);
+  scene.textures.push_back({4, 2, {{1, 1, 1}, {1, 1, 1}, {1, 1, 1}, {1, 1, 1},
+                                      {0, 0, 0}, {0, 0, 0}, {0, 0, 0}, {0, 0, 0}}});
+  scene.environments.push_back({identity3x4f, {1, 1, 1}, 0});
+  auto params       = trace_params{};
+  params.resolution = 8;
+  params.samples    = 4;
+  for (auto sampler : {trace_sampler_type::path, trace_sampler_type::naive}) {
+    params.sampler = sampler;
+    auto image     = render_scene(scene, params).image;
+    for (auto& pixel : image.pixels) EXPECT_NEAR(mean(pixel), 1, 1e-5f);
+  }
+}

@@ -285,7 +285,7 @@ static vec3f eval_environments(const scene_data& scene, const trace_context& con
     if (environment.emission_tex >= 0) {
       auto local = transform_direction(context.environment_inverses[i], direction);
       auto uv    = direction_to_equirect(local);
-      emission *= eval_texture(scene.textures[environment.emission_tex], uv);
+      emission *= eval_environment_texture(scene.textures[environment.emission_tex], uv);
       if (mis_needed) light_pdf = environment_texture_pdf(scene, context.lights[light], uv);
     }
     radiance += emission * (mis_needed ? power_heuristic(bsdf_pdf, light_pdf / nlights) : 1.0f);
@@ -435,7 +435,7 @@ static vec3f trace_path(const scene_data& scene, const scene_bvh& bvh,
             auto& environment = scene.environments[light.environment];
             if (environment.emission_tex >= 0) {
               emission = environment.emission *
-                         eval_texture(scene.textures[environment.emission_tex], sample.uv);
+                         eval_environment_texture(scene.textures[environment.emission_tex], sample.uv);
               pdf = environment_texture_pdf(scene, light, sample.uv) / nlights;
             } else {
               emission = environment.emission;
