@@ -17,7 +17,9 @@ seed different from the variants' so that their noise is independent.
 
 Timing: the machine may be shared, so single-thread variants are timed by
 render CPU time (what yscene reports as render_cpu) and the two-thread variant
-by wall time; the load average is recorded with every measurement.
+by wall time; the load average is recorded with every measurement. A full run
+renders every variant twice, in opposite orders, and keeps the faster time of
+each checkpoint.
 """
 
 import argparse
@@ -269,6 +271,21 @@ def render_variant(yscene, name, path, variant, config, ref_image):
     return rows
 
 
+def fastest_runs(runs):
+    """One row per checkpoint that every run reached: the run with the least
+    time there (the renders are deterministic, so the errors are the same;
+    interference from other jobs only adds time). The load is the mean."""
+    spps = set.intersection(*[{r["spp"] for r in run} for run in runs])
+    rows = []
+    for spp in sorted(spps):
+        candidates = [r for run in runs for r in run if r["spp"] == spp]
+        best = dict(min(candidates, key=lambda r: r["seconds"]))
+        best["runs"] = len(candidates)
+        best["load"] = round(sum(r["load"] for r in candidates) / len(candidates), 2)
+        rows.append(best)
+    return rows
+
+
 def time_to_error(rows, target):
     """Seconds to reach an RMSE, interpolated log-log between checkpoints; past
     the last one, extrapolated by the Monte Carlo law MSE ~ 1/t only if the last
@@ -421,7 +438,10 @@ def write_report(out, config, results, limits, scales, pows, plots, command):
              "the spp given below (seed 1, all threads); every variant renders at 1, 2, 4, "
              "... spp up to an eighth of the reference's spp (so that the reference's own "
              "noise stays below a ninth of the measured MSE), or stops earlier, at the first "
-             f"power of two reached after {config['budget']} s. Times are render CPU seconds "
+             f"power of two reached after {config['budget']} s. Every variant runs "
+             f"{config['runs']} time(s), the variant order reversed on every other run; "
+             "each checkpoint keeps the fastest run (the renders are deterministic, so "
+             "only the time differs). Times are render CPU seconds "
              "for one-thread variants and wall seconds for `path-2t`; loading and the BVH "
              "build are not included. Geometry variants (`lines-N`, `flat`) are compared "
              "with the native-curve reference, so their error includes the geometric "
@@ -581,11 +601,11 @@ def main():
     if args.quick:
         config = {"resolution": 64, "reference_spp": 256, "budget": 0.5, "target_spp": 4,
                   "limit_spp": 2, "repeats": 3, "scale_strands": [10000, 100000],
-                  "scale_spp": 2, "scenes": 3}
+                  "scale_spp": 2, "scenes": 3, "runs": 1}
     else:
         config = {"resolution": 160, "reference_spp": 256, "budget": 8, "target_spp": 8,
                   "limit_spp": 2, "repeats": 3, "scale_strands": SCALE_STRANDS,
-                  "scale_spp": 4, "scenes": 4}
+                  "scale_spp": 4, "scenes": 4, "runs": 2}
     config["build"] = args.build
     # A quick run never overwrites the committed report.
     out = os.path.join(ROOT, args.out or ("out/bench/quick-report" if args.quick
@@ -604,11 +624,19 @@ def main():
     results, limits, plots, all_rows = {}, {}, {}, []
     for name, path in scenes:
         ref_image, ref_meta = reference(yscene, name, path, config)
+        variants = [v for v in VARIANTS
+                    if name != "straight-1m" or v[0] in VARIANTS_1M]
+        # Every variant runs config["runs"] times, the order reversed on every
+        # other run, so that a slow spell of the shared machine or the order
+        # itself does not favour one variant; fastest_runs keeps the fastest.
+        runs = {v[0]: [] for v in variants}
+        for run_index in range(config["runs"]):
+            for variant in (variants if run_index % 2 == 0 else variants[::-1]):
+                runs[variant[0]].append(
+                    render_variant(yscene, name, path, variant, config, ref_image))
         rows = []
-        for variant in VARIANTS:
-            if name == "straight-1m" and variant[0] not in VARIANTS_1M:
-                continue
-            rows += render_variant(yscene, name, path, variant, config, ref_image)
+        for variant in variants:
+            rows += fastest_runs(runs[variant[0]])
         path_rows = [r for r in rows if r["variant"] == "path"]
         at = [r for r in path_rows if r["spp"] <= config["target_spp"]]
         target = (at or path_rows)[-1]["rmse"]
