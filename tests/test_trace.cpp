@@ -213,6 +213,19 @@ static scene_data make_sphere_light_scene() {
   return scene;
 }
 
+// Image means of path (MIS) and naive (BSDF sampling only) renders of one
+// scene, unclamped, at their own sample counts.
+static std::pair<double, double> path_and_naive_means(
+    const scene_data& scene, trace_params params, int path_samples, int naive_samples) {
+  params.clamp   = 0;
+  params.sampler = trace_sampler_type::path;
+  params.samples = path_samples;
+  auto path      = image_mean(render_scene(scene, params).image);
+  params.sampler = trace_sampler_type::naive;
+  params.samples = naive_samples;
+  return {path, image_mean(render_scene(scene, params).image)};
+}
+
 TEST(trace, sphere_light_is_not_counted_through_itself) {
   // 16x16 pixels, bounces 2 (direct light on the floor and the sphere's
   // emission); path at 64 spp, naive at 2048 spp: means within 3%. Counting
@@ -220,14 +233,8 @@ TEST(trace, sphere_light_is_not_counted_through_itself) {
   auto params       = trace_params{};
   params.resolution = 16;
   params.bounces    = 2;
-  params.clamp      = 0;
   params.seed       = 5;
-  params.samples    = 64;
-  auto path         = render_scene(make_sphere_light_scene(), params);
-  params.sampler    = trace_sampler_type::naive;
-  params.samples    = 2048;
-  auto naive        = render_scene(make_sphere_light_scene(), params);
-  auto path_mean = image_mean(path.image), naive_mean = image_mean(naive.image);
+  auto [path_mean, naive_mean] = path_and_naive_means(make_sphere_light_scene(), params, 64, 2048);
   EXPECT_GT(naive_mean, 0.1);
   EXPECT_NEAR(path_mean / naive_mean, 1, 0.03) << path_mean << " " << naive_mean;
 }
@@ -256,14 +263,8 @@ TEST(trace, one_bounce_is_direct_light_for_both_samplers) {
   auto params       = trace_params{};
   params.resolution = 24;
   params.bounces    = 1;
-  params.clamp      = 0;
   params.seed       = 9;
-  params.samples    = 64;
-  auto path         = render_scene(make_lit_scene(), params);
-  params.sampler    = trace_sampler_type::naive;
-  params.samples    = 1024;
-  auto naive        = render_scene(make_lit_scene(), params);
-  auto path_mean = image_mean(path.image), naive_mean = image_mean(naive.image);
+  auto [path_mean, naive_mean] = path_and_naive_means(make_lit_scene(), params, 64, 1024);
   EXPECT_GT(naive_mean, 0.05);
   EXPECT_NEAR(path_mean / naive_mean, 1, 0.03) << path_mean << " " << naive_mean;
 }

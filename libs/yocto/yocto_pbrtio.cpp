@@ -41,6 +41,16 @@ static bool ends_with(std::string_view text, std::string_view suffix) {
          text.substr(text.size() - suffix.size()) == suffix;
 }
 
+// A converted scene is validated like a json one (what the directives cannot
+// see alone, e.g. a Scale 0 0 0 instance); on error it is left empty.
+static bool validate_loaded_scene(
+    scene_data& scene, const std::string& filename, std::string& error) {
+  if (validate_scene(scene, error)) return true;
+  error = filename + ": " + error;
+  scene = {};
+  return false;
+}
+
 // Reads a whole file into memory; .gz files are inflated. A gzip stream that
 // ends early or fails its checksum is an error, never a silently short file.
 static bool read_whole_file(
@@ -1829,13 +1839,7 @@ bool load_pbrt_scene(const std::string& filename, scene_data& scene, std::string
     for (auto& shape : scene.shapes)
       if (!shape.curves.empty()) shape = curves_to_lines(shape, params.segments);
   }
-  // What the directives cannot see alone, e.g. a Scale 0 0 0 instance.
-  if (!validate_scene(scene, error)) {
-    error = filename + ": " + error;
-    scene = {};
-    return false;
-  }
-  return true;
+  return validate_loaded_scene(scene, filename, error);
 }
 
 }  // namespace yocto
@@ -2119,12 +2123,7 @@ bool load_hair_scene(const std::string& filename, scene_data& scene, std::string
   scene.environments.push_back({identity3x4f, {1, 1, 1}, -1});
   scene.environment_names.push_back("sky");
   add_missing_camera(scene);
-  if (!validate_scene(scene, error)) {
-    error = filename + ": " + error;
-    scene = {};
-    return false;
-  }
-  return true;
+  return validate_loaded_scene(scene, filename, error);
 }
 
 }  // namespace yocto
