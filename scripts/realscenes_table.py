@@ -187,6 +187,8 @@ def main():
     parser.add_argument("--update", default="",
                         help="replace the section '## Real scene files' of this markdown file")
     args = parser.parse_args()
+    # The render times depend on what else runs: the load is recorded with them.
+    args.load_at_start = os.getloadavg()[0]
     if args.update:
         # Print into a buffer, then put it in place of the old section.
         buffer = io.StringIO()
@@ -252,8 +254,10 @@ def report(args):
           "scenes are converted with `yscene convert` (time as yscene reports it: parsing the "
           "scene and its stand-in includes, writing json and PLYs); json scenes are loaded "
           "directly. Render time is `yscene render` at %d spp, largest side %d pixels, on %s "
-          "(%d cores, shared with other jobs), as yscene reports it (rendering only, not "
-          "loading).\n" % (args.samples, args.resolution, platform.machine(), os.cpu_count()))
+          "(%d cores; load average %.1f before the run, %.1f after it, a two-thread render "
+          "alone making about 2), as yscene reports it (rendering only, not loading).\n"
+          % (args.samples, args.resolution, platform.machine(), os.cpu_count(),
+             args.load_at_start, os.getloadavg()[0]))
     print("| scene file | stand-ins | strands | Bezier segments | convert (s) | "
           "resolution | render (s) |")
     print("|---|---|---:|---:|---:|---|---:|")
