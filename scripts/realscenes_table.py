@@ -187,8 +187,6 @@ def main():
     parser.add_argument("--update", default="",
                         help="replace the section '## Real scene files' of this markdown file")
     args = parser.parse_args()
-    # The render times depend on what else runs: the load is recorded with them.
-    args.load_at_start = os.getloadavg()[0]
     if args.update:
         # Print into a buffer, then put it in place of the old section.
         buffer = io.StringIO()
@@ -216,6 +214,8 @@ def replace_section(path, heading, text):
 
 
 def report(args):
+    # The render times depend on what else runs: the load is recorded with them.
+    load_at_start = os.getloadavg()[0]
     yscene = os.path.join(args.build, "apps", "yscene")
     if not os.path.isdir(DATA):
         sys.exit(DATA + " is absent: no real scene files")
@@ -257,7 +257,7 @@ def report(args):
           "(%d cores; load average %.1f before the run, %.1f after it, a two-thread render "
           "alone making about 2), as yscene reports it (rendering only, not loading).\n"
           % (args.samples, args.resolution, platform.machine(), os.cpu_count(),
-             args.load_at_start, os.getloadavg()[0]))
+             load_at_start, os.getloadavg()[0]))
     print("| scene file | stand-ins | strands | Bezier segments | convert (s) | "
           "resolution | render (s) |")
     print("|---|---|---:|---:|---:|---|---:|")
