@@ -4,12 +4,16 @@
 // A PCG32 generator (O'Neill, PCG: A Family of Simple Fast Space-Efficient
 // Statistically Good Algorithms for Random Number Generation, 2014) and the
 // warps from uniform numbers to directions and points that a path tracer uses,
-// each with its pdf.
+// each with its pdf; and the sample sequences of a pixel: Owen-scrambled
+// Sobol points (Burley, Practical Hash-based Owen Scrambling, JCGT 2020) or
+// independent PCG numbers, both pure functions of (seed, pixel, sample index).
 //
 
 #ifndef YOCTO_SAMPLING_H_
 #define YOCTO_SAMPLING_H_
 
+#include <array>
+#include <string>
 #include <vector>
 
 #include "yocto_math.h"
@@ -66,6 +70,123 @@ inline vec3f rand3f(rng_state& rng) {
   auto y = rand1f(rng);
   auto z = rand1f(rng);
   return {x, y, z};
+}
+
+}  // namespace yocto
+
+// -----------------------------------------------------------------------------
+// SCRAMBLED SOBOL POINTS
+// -----------------------------------------------------------------------------
+namespace yocto {
+
+inline uint32_t reverse_bits(uint32_t x) {
+  x = ((x >> 1) & 0x55555555u) | ((x & 0x55555555u) << 1);
+  x = ((x >> 2) & 0x33333333u) | ((x & 0x33333333u) << 2);
+  x = ((x >> 4) & 0x0f0f0f0fu) | ((x & 0x0f0f0f0fu) << 4);
+  x = ((x >> 8) & 0x00ff00ffu) | ((x & 0x00ff00ffu) << 8);
+  return (x >> 16) | (x << 16);
+}
+
+// The first two dimensions of the Sobol sequence as 0.32 fixed point: the
+// van der Corput radical inverse, and the dimension whose generator matrix
+// is Pascal's triangle mod 2 (each direction number is the previous one xor
+// itself shifted right). Together a (0,2)-sequence in base 2.
+inline uint32_t sobol_dimension0(uint32_t index) { return reverse_bits(index); }
+inline uint32_t sobol_dimension1(uint32_t index) {
+  auto result = 0u;
+  for (auto direction = 1u << 31; index != 0; index >>= 1, direction ^= direction >> 1) {
+    if (index & 1) result ^= direction;
+  }
+  return result;
+}
+
+// Burley 2020, listing 2: a hash in which every bit is changed only as a
+// function of the bits below it (additions and products with even constants
+// carry upwards only), so that on bit-reversed numbers it is an Owen
+// scramble (Laine and Karras, Stratified Sampling for Stochastic
+// Transparency, 2011).
+inline uint32_t laine_karras_permutation(uint32_t x, uint32_t seed) {
+  x += seed;
+  x ^= x * 0x6c50b47cu;
+  x ^= x * 0xb82f1e52u;
+  x ^= x * 0xc7afe638u;
+  x ^= x * 0x8d22f6e6u;
+  return x;
+}
+
+// Owen scrambling of a 0.32 fixed-point number: each digit flipped by a
+// random function of the digits above it. Applied to a sample index, it is
+// a shuffle that maps every aligned block of 2^k indices to another one.
+inline uint32_t nested_uniform_scramble(uint32_t x, uint32_t seed) {
+  return reverse_bits(laine_karras_permutation(reverse_bits(x), seed));
+}
+
+// A 0.32 fixed-point number to a float in [0, 1) (its top 24 bits).
+inline float fixed_to_float(uint32_t x) { return (x >> 8) * (1.0f / 16777216.0f); }
+
+// Point `index` of a shuffled, Owen-scrambled 2D Sobol sequence (Burley
+// 2020, section 4): the same seed gives one (0,2)-sequence, other seeds
+// give statistically independent ones, so that every pair of dimensions of
+// a path is stratified without a table of higher Sobol dimensions.
+// The scrambles work on bit-reversed values, and dimension 0 is the reversed
+// index itself: reverse_bits(laine_karras_permutation(shuffled, seed)) is
+// nested_uniform_scramble(sobol_dimension0(shuffled), seed) with two
+// reversals less (and likewise for dimension 1, generated reversed).
+inline vec2f sample_sobol2f(uint32_t index, uint64_t seed) {
+  auto hash     = hash_uint64(seed);
+  auto more     = hash_uint64(hash);
+  auto shuffled = nested_uniform_scramble(index, (uint32_t)hash);
+  auto reversed = 0u;  // reverse_bits(sobol_dimension1(shuffled))
+  for (auto direction = 1u, i = shuffled; i != 0; i >>= 1, direction ^= direction << 1) {
+    if (i & 1) reversed ^= direction;
+  }
+  auto x = reverse_bits(laine_karras_permutation(shuffled, (uint32_t)(hash >> 32)));
+  auto y = reverse_bits(laine_karras_permutation(reversed, (uint32_t)more));
+  return {fixed_to_float(x), fixed_to_float(y)};
+}
+
+}  // namespace yocto
+
+// -----------------------------------------------------------------------------
+// SAMPLE SEQUENCES OF A PIXEL
+// -----------------------------------------------------------------------------
+namespace yocto {
+
+// Scrambled Sobol pairs, or independent numbers.
+enum struct sequence_type { sobol, independent };
+inline const auto sequence_names = std::array<std::string, 2>{"sobol", "independent"};
+
+// The numbers of one pixel sample. They are drawn as pairs of dimensions at
+// fixed positions (a path's bounce k uses the same pairs in every sample);
+// Sobol pairs below `sobol_pairs`, a hashed PCG stream past them.
+struct sequence_state {
+  sequence_type type        = sequence_type::sobol;
+  uint64_t      key         = 0;  // hash of seed and pixel
+  uint32_t      index       = 0;  // sample index
+  int           sobol_pairs = 0;
+  rng_state     rng         = {};
+};
+
+// The sequence of sample `sample` of pixel `pixel`: a pure function of its
+// arguments, so that any range of samples renders alone.
+inline sequence_state make_sequence(sequence_type type, uint64_t seed, int64_t pixel,
+    uint32_t sample, int sobol_pairs) {
+  auto state        = sequence_state{};
+  state.type        = type;
+  state.key         = hash_uint64(hash_uint64(seed) ^ (uint64_t)pixel);
+  state.index       = sample;
+  state.sobol_pairs = type == sequence_type::sobol ? sobol_pairs : 0;
+  auto key   = hash_uint64(seed) ^ hash_uint64(((uint64_t)pixel << 24) ^ (uint64_t)sample);
+  state.rng  = make_rng(hash_uint64(key), (uint64_t)pixel);
+  return state;
+}
+
+// The pair of dimensions `pair` of the sample.
+inline vec2f sample_sequence2f(sequence_state& state, int pair) {
+  if (pair < state.sobol_pairs) {
+    return sample_sobol2f(state.index, state.key ^ ((uint64_t)pair << 40));
+  }
+  return rand2f(state.rng);
 }
 
 }  // namespace yocto

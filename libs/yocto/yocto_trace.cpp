@@ -114,11 +114,11 @@ static bool may_scatter(const trace_point& point, const vec3f& outgoing, const v
          (dot(point.normal, incoming) > 0 && dot(point.normal, outgoing) > 0);
 }
 
+// `more` is used by hair with params.hair_four_numbers only (empty otherwise).
 static vec3f sample_bsdfcos(const trace_point& point, const vec3f& outgoing, float rnl,
-    const vec2f& rn, const trace_params& params, rng_state& rng) {
+    const vec2f& rn, const vec2f& more, const trace_params& params) {
   if (point.type == material_type::hair) {
     if (params.hair_four_numbers) {
-      auto more = rand2f(rng);
       return sample_hair_scattering(point.hair, outgoing, vec4f{rn.x, rn.y, more.x, more.y});
     }
     return sample_hair_scattering(point.hair, outgoing, rn);
@@ -143,7 +143,7 @@ static vec3f sample_bsdfcos(const trace_point& point, const vec3f& outgoing, flo
 // -----------------------------------------------------------------------------
 namespace yocto {
 
-trace_context make_trace_context(const scene_data& scene) {
+trace_context make_trace_context(const scene_data& scene, const trace_params& params) {
   auto context = trace_context{};
   for (auto& material : scene.materials)
     context.hair.push_back(make_hair_precomputed(material.hair));
@@ -173,6 +173,9 @@ trace_context make_trace_context(const scene_data& scene) {
   for (auto i = 0; i < (int)scene.environments.size(); i++) {
     auto& environment = scene.environments[i];
     if (environment.emission == vec3f{0, 0, 0}) continue;
+    // A constant sky is found as well by the BSDF's own samples as by
+    // uniform light samples, which cost a shadow ray each.
+    if (environment.emission_tex < 0 && params.lights == trace_lights_type::automatic) continue;
     auto light        = trace_light{};
     light.environment = i;
     if (environment.emission_tex >= 0) {
@@ -364,12 +367,24 @@ static float area_light_pdf(const scene_data& scene, const trace_context& contex
   return distance * distance / (cos_light * area) / context.lights.size();
 }
 
+// The dimensions of a pixel sample, in pairs: the pixel position and the
+// lens, then five pairs per bounce (light choice and light element, point on
+// the light, glossy lobe and roulette, BSDF direction, and two more numbers
+// for hair sampled with four). Fixed positions keep every bounce's numbers
+// stratified across the samples of a pixel, whatever the path did before.
+enum trace_pair {
+  trace_pair_pixel = 0, trace_pair_lens = 1,
+  trace_pair_light = 0, trace_pair_light_point = 1, trace_pair_lobe_roulette = 2,
+  trace_pair_direction = 3, trace_pair_direction_more = 4,
+};
+static int trace_bounce_pairs(int bounce) { return 2 + 5 * bounce; }
+
 // The path tracer; when `record` is not null, every ray cast is appended to it.
 // A path scatters at most params.bounces times (pbrt's maxdepth): the ray
 // leaving the last scattering vertex is still traced for the emission it
 // finds, so that its MIS weight and the light sample's add up to one.
 static vec3f trace_path(const scene_data& scene, const scene_bvh& bvh,
-    const trace_context& context, const ray3f& camera_ray, rng_state& rng,
+    const trace_context& context, const ray3f& camera_ray, sequence_state& sequence,
     const trace_params& params, int64_t& rays, std::vector<trace_ray>* record) {
   auto radiance  = vec3f{0, 0, 0};
   auto weight    = vec3f{1, 1, 1};
@@ -398,11 +413,13 @@ static vec3f trace_path(const scene_data& scene, const scene_bvh& bvh,
     if (bounce >= params.bounces || scatters_nothing(point)) break;
 
     // Next-event estimation: one light, one shadow ray.
+    auto pairs = trace_bounce_pairs(bounce);
     if (use_mis && !context.lights.empty()) {
       auto  nlights = (int)context.lights.size();
-      auto& light   = context.lights[std::min(rand1i(rng, nlights), nlights - 1)];
-      auto  rel     = rand1f(rng);
-      auto  ruv     = rand2f(rng);
+      auto  choice  = sample_sequence2f(sequence, pairs + trace_pair_light);
+      auto& light   = context.lights[std::min((int)(choice.x * nlights), nlights - 1)];
+      auto  rel     = choice.y;
+      auto  ruv     = sample_sequence2f(sequence, pairs + trace_pair_light_point);
       auto  sample  = sample_light(scene, light, point.position, rel, ruv);
       auto  incoming = sample.incoming;
       // The BSDF is evaluated only for visible light samples, the shadow ray
@@ -457,9 +474,12 @@ static vec3f trace_path(const scene_data& scene, const scene_bvh& bvh,
     }
 
     // BSDF sampling.
-    auto rnl      = rand1f(rng);
-    auto rn       = rand2f(rng);
-    auto incoming = sample_bsdfcos(point, outgoing, rnl, rn, params, rng);
+    auto lobe_roulette = sample_sequence2f(sequence, pairs + trace_pair_lobe_roulette);
+    auto rn            = sample_sequence2f(sequence, pairs + trace_pair_direction);
+    auto more = params.hair_four_numbers && point.type == material_type::hair
+                    ? sample_sequence2f(sequence, pairs + trace_pair_direction_more)
+                    : vec2f{0, 0};
+    auto incoming = sample_bsdfcos(point, outgoing, lobe_roulette.x, rn, more, params);
     if (incoming == vec3f{0, 0, 0} || !isfinite(incoming)) break;
     auto [bsdfcos, pdf] = eval_bsdfcos_and_pdf(point, outgoing, incoming);
     if (!(pdf > 0) || bsdfcos == vec3f{0, 0, 0}) break;
@@ -472,7 +492,7 @@ static vec3f trace_path(const scene_data& scene, const scene_bvh& bvh,
     // nothing else (as pbrt does). Unbiased either way.
     auto survive = max_component(weight);
     if (bounce >= 3 && survive < 1) {
-      if (rand1f(rng) >= survive) break;
+      if (lobe_roulette.y >= survive) break;
       weight /= survive;
     }
     ray = spawn_ray(point, incoming);
@@ -481,9 +501,9 @@ static vec3f trace_path(const scene_data& scene, const scene_bvh& bvh,
 }
 
 vec3f trace_radiance(const scene_data& scene, const scene_bvh& bvh,
-    const trace_context& context, const ray3f& ray, rng_state& rng,
+    const trace_context& context, const ray3f& ray, sequence_state& sequence,
     const trace_params& params, int64_t& rays) {
-  return trace_path(scene, bvh, context, ray, rng, params, rays, nullptr);
+  return trace_path(scene, bvh, context, ray, sequence, params, rays, nullptr);
 }
 
 }  // namespace yocto
@@ -517,11 +537,6 @@ void init_trace_state(trace_state& state, const scene_data& scene, const trace_p
   state.nonfinite = 0;
 }
 
-// Random numbers of one pixel sample: a stream per (seed, pixel, sample).
-static rng_state make_pixel_rng(uint64_t seed, int pixel, int sample) {
-  auto key = hash_uint64(seed) ^ hash_uint64(((uint64_t)pixel << 24) ^ (uint64_t)sample);
-  return make_rng(hash_uint64(key), (uint64_t)pixel);
-}
 
 // Runs f(begin, end) over [0, size) in chunks on `threads` threads (0 for
 // all), with the floating-point modes Embree asks for set in every thread.
@@ -553,12 +568,13 @@ static void trace_rows(trace_state& state, const scene_data& scene, const scene_
       auto pixel = j * state.width + i;
       auto sum   = glm::dvec3{0, 0, 0};
       for (auto s = state.samples; s < state.samples + count; s++) {
-        auto rng      = make_pixel_rng(params.seed, pixel, s);
-        auto puv      = rand2f(rng);
-        auto luv      = rand2f(rng);
+        auto sequence = make_sequence(params.sequence, params.seed, pixel, (uint32_t)s,
+            trace_bounce_pairs(params.sobol_bounces));
+        auto puv      = sample_sequence2f(sequence, trace_pair_pixel);
+        auto luv      = sample_sequence2f(sequence, trace_pair_lens);
         auto uv       = vec2f{(i + puv.x) / state.width, (j + puv.y) / state.height};
         auto ray      = eval_camera(camera, uv, luv);
-        auto radiance = trace_path(scene, bvh, context, ray, rng, params, rays, record);
+        auto radiance = trace_path(scene, bvh, context, ray, sequence, params, rays, record);
         if (!isfinite(radiance)) {
           nonfinite++;
           continue;

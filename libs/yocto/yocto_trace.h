@@ -29,10 +29,18 @@ namespace yocto {
 enum struct trace_sampler_type { path, naive };
 inline const auto trace_sampler_names = std::array<std::string, 2>{"path", "naive"};
 
+// The lights that `path` samples: `automatic` leaves out those that BSDF
+// sampling finds as well (a constant environment), `all` samples every one.
+enum struct trace_lights_type { automatic, all };
+inline const auto trace_lights_names = std::array<std::string, 2>{"automatic", "all"};
+
 struct trace_params {
   int                camera     = 0;
   int                resolution = 720;  // largest image side
   trace_sampler_type sampler    = trace_sampler_type::path;
+  trace_lights_type  lights     = trace_lights_type::automatic;
+  sequence_type      sequence   = sequence_type::sobol;  // random numbers of a pixel
+  int                sobol_bounces = 32;  // bounces with Sobol numbers, then independent
   int                samples    = 64;
   int                bounces    = 32;    // scattering events per path (pbrt maxdepth)
   float              clamp      = 100;   // max sample value, 0 for none
@@ -70,7 +78,7 @@ struct trace_context {
   std::vector<frame3f>          environment_inverses = {};  // world to local
 };
 
-trace_context make_trace_context(const scene_data& scene);
+trace_context make_trace_context(const scene_data& scene, const trace_params& params = {});
 
 }  // namespace yocto
 
@@ -105,7 +113,7 @@ texture_data get_image(const trace_state& state);
 
 // Radiance of one path from a camera ray (exposed for tests).
 vec3f trace_radiance(const scene_data& scene, const scene_bvh& bvh,
-    const trace_context& context, const ray3f& ray, rng_state& rng,
+    const trace_context& context, const ray3f& ray, sequence_state& sequence,
     const trace_params& params, int64_t& rays);
 
 }  // namespace yocto

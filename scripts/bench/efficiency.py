@@ -1,0 +1,237 @@
+#!/usr/bin/env python3
+"""Efficiency before and after: the same scenes rendered by two yscene binaries.
+
+    python3 scripts/bench/efficiency.py --before OLD/yscene [--after build/apps/yscene]
+        [--quick] [--scenes fur hair-locks ...] [--runs 3]
+
+For every scene, references are rendered by both binaries with their default
+settings, each as four independent renders (seeds 101-104 and 201-204) whose
+spread gives the references' own per-pixel noise. The two references must
+agree in expectation: the report gives the ratio of their squared difference
+to the sum of their noise (about 1 when they agree, far above 1 when one is
+biased) and the difference of their means in standard errors. The error of a
+variant is its MSE against the mean of the two references minus the
+references' own noise (so that it is the variant's alone); its efficiency is
+1 / (MSE * CPU seconds) at 16, 64 and 256 spp, where CPU seconds are the
+render's CPU time (all threads, loading and BVH build excluded), the median
+of --runs runs. Variants render on --threads threads (2: the machine).
+
+Writes docs/benchmark/efficiency.md and efficiency.csv (or --out). Renders and
+references are cached in out/bench/efficiency/, keyed by the binary's hash.
+"""
+
+import argparse
+import csv
+import hashlib
+import math
+import os
+import statistics
+import sys
+import time
+from array import array
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from run_bench import ROOT, log, parse_fields, read_pfm, run, load_average  # noqa: E402
+
+# name, how the scene is made (yscene hair arguments, or a path in the tree),
+# resolution. The fur ball is issue 11's: 20,000 straight strands on a grey
+# sphere under a white constant sky.
+SCENES = {
+    "fur": (["--style", "fur", "--strands", "20000"], 256),
+    "hair-locks": ("scenes/hair-locks/hair-locks.json", 192),
+    "straight-hair": ("scenes/straight-hair/straight-hair.json", 128),
+    "curly-hair": ("scenes/curly-hair/curly-hair.json", 128),
+}
+
+# name, binary ("before" or "after"), yscene render arguments.
+VARIANTS = [
+    ("before", "before", []),
+    ("before-naive", "before", ["--sampler", "naive"]),
+    ("after", "after", []),
+    ("after-independent", "after", ["--sequence", "independent"]),
+    ("after-lights-all", "after", ["--lights", "all"]),
+    ("after-independent-lights-all", "after", ["--sequence", "independent", "--lights", "all"]),
+    ("after-naive", "after", ["--sampler", "naive"]),
+    ("after-four-sobol", "after", ["--hair-four-numbers"]),
+    ("after-four-independent", "after", ["--hair-four-numbers", "--sequence", "independent"]),
+]
+CHECKPOINTS = [16, 64, 256]
+
+
+def file_hash(path):
+    with open(path, "rb") as f:
+        return hashlib.sha1(f.read()).hexdigest()[:12]
+
+
+def scene_path(name, yscene):
+    how, _ = SCENES[name]
+    if isinstance(how, str):
+        return how
+    path = f"out/bench/efficiency/scenes/{name}/{name}.json"
+    if not os.path.exists(os.path.join(ROOT, path)):
+        os.makedirs(os.path.dirname(os.path.join(ROOT, path)), exist_ok=True)
+        run([yscene, "hair"] + how + ["--output", path])
+    return path
+
+
+def render(binary, scene, output, spp, resolution, seed, threads, args, checkpoints=False):
+    """Renders (if not cached) and returns the stats fields and checkpoint rows."""
+    stdout = run([binary, "render", scene, "--output", output, "--quiet", "--stats",
+                  "--samples", str(spp), "--resolution", str(resolution), "--seed", str(seed),
+                  "--threads", str(threads), "--bounces", "31", "--clamp", "0"] + args +
+                 (["--checkpoints"] if checkpoints else []))
+    rows = [parse_fields(line) for line in stdout.splitlines() if line.startswith("checkpoint")]
+    stats = [parse_fields(line) for line in stdout.splitlines() if line.startswith("stats")]
+    return stats[0], rows
+
+
+def reference(binary, tag, name, scene, resolution, spp, seeds, threads, cache):
+    """Mean image and per-pixel variance of that mean, from len(seeds) renders."""
+    images = []
+    for seed in seeds:
+        output = os.path.join(cache, f"ref-{name}-{tag}-{resolution}-{spp}-{seed}.pfm")
+        if not os.path.exists(output):
+            log(f"  reference {name} {tag} seed {seed}: {spp} spp")
+            render(binary, scene, output, spp, resolution, seed, threads, [])
+        images.append(read_pfm(output))
+    width, height = images[0][:2]
+    count = len(images)
+    mean, variance = array("d"), array("d")
+    for values in zip(*[image[2] for image in images]):
+        m = sum(values) / count
+        mean.append(m)
+        variance.append(sum((v - m) ** 2 for v in values) / (count - 1) / count)
+    means = [sum(image[2]) / len(image[2]) for image in images]
+    return {"size": (width, height), "mean": mean, "variance": variance, "means": means}
+
+
+def compare_references(a, b):
+    """Squared difference over summed noise, and the mean difference in standard errors."""
+    squared = sum((x - y) ** 2 for x, y in zip(a["mean"], b["mean"]))
+    noise = sum(a["variance"]) + sum(b["variance"])
+    mean_a, mean_b = statistics.mean(a["means"]), statistics.mean(b["means"])
+    se = math.sqrt(statistics.variance(a["means"]) / len(a["means"]) +
+                   statistics.variance(b["means"]) / len(b["means"]))
+    return squared / noise, (mean_a - mean_b) / se if se > 0 else 0.0, mean_a, mean_b
+
+
+def variant_mse(filename, truth, truth_noise):
+    width, height, pixels = read_pfm(filename)
+    if (width, height) != truth["size"]:
+        sys.exit(f"{filename}: size differs from the reference")
+    squared = sum((x - r) ** 2 for x, r in zip(pixels, truth["mean"]))
+    return squared / len(pixels) - truth_noise
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--before", required=True, help="yscene binary of the old default")
+    parser.add_argument("--after", default="build/apps/yscene")
+    parser.add_argument("--scenes", nargs="*", default=list(SCENES))
+    parser.add_argument("--variants", nargs="*", default=[v[0] for v in VARIANTS])
+    parser.add_argument("--reference-spp", type=int, default=1024,
+                        help="spp of each reference (four renders of a quarter each)")
+    parser.add_argument("--runs", type=int, default=3, help="timed runs per variant (median)")
+    parser.add_argument("--threads", type=int, default=2)
+    parser.add_argument("--quick", action="store_true",
+                        help="quarter resolution, 256-spp references, one run")
+    parser.add_argument("--out", default="docs/benchmark")
+    parser.add_argument("--commits", default="", help="'BEFORE AFTER' commit ids for the report")
+    args = parser.parse_args()
+    if args.quick:
+        args.reference_spp, args.runs = 256, 1
+    binaries = {"before": os.path.abspath(args.before), "after": os.path.abspath(args.after)}
+    hashes = {k: file_hash(v) for k, v in binaries.items()}
+    cache = os.path.join(ROOT, "out/bench/efficiency")
+    os.makedirs(cache, exist_ok=True)
+    os.chdir(ROOT)
+
+    rows, checks = [], []
+    for name in args.scenes:
+        scene = scene_path(name, binaries["after"])
+        resolution = SCENES[name][1] // (4 if args.quick else 1)
+        log(f"{name}: references at {resolution} px")
+        quarter = args.reference_spp // 4
+        refs = {tag: reference(binaries[tag], hashes[tag], name, scene, resolution, quarter,
+                               [seed + 100 * (i + 1) for seed in range(1, 5)], 0, cache)
+                for i, tag in enumerate(["before", "after"])}
+        ratio, z, mean_before, mean_after = compare_references(refs["before"], refs["after"])
+        checks.append({"scene": name, "resolution": resolution, "ratio": ratio, "z": z,
+                       "mean_before": mean_before, "mean_after": mean_after})
+        truth = {"size": refs["before"]["size"],
+                 "mean": array("d", [(x + y) / 2 for x, y in zip(refs["before"]["mean"],
+                                                                  refs["after"]["mean"])])}
+        truth_noise = (sum(refs["before"]["variance"]) + sum(refs["after"]["variance"])) / 4 / \
+            len(truth["mean"])
+        for variant, tag, flags in VARIANTS:
+            if variant not in args.variants:
+                continue
+            times = {spp: [] for spp in CHECKPOINTS}
+            output = os.path.join(cache, f"{name}-{variant}-{hashes[tag]}-{resolution}.pfm")
+            for r in range(args.runs):
+                _, points = render(binaries[tag], scene, output, CHECKPOINTS[-1], resolution, 1,
+                                   args.threads, flags, checkpoints=True)
+                for point in points:
+                    if int(point["spp"]) in times:
+                        times[int(point["spp"])].append(point["cpu_seconds"])
+            for spp in CHECKPOINTS:
+                checkpoint = output[:-4] + f"-{spp:05d}spp.pfm"
+                mse = variant_mse(checkpoint, truth, truth_noise)
+                cpu = statistics.median(times[spp])
+                rows.append({"scene": name, "variant": variant, "spp": spp, "mse": mse,
+                             "cpu_seconds": cpu, "cpu_per_spp": cpu / spp,
+                             "efficiency": 1 / (mse * cpu) if mse > 0 else float("inf"),
+                             "runs": " ".join(f"{t:.3f}" for t in times[spp]),
+                             "load": load_average()})
+            log(f"  {variant}: " + ", ".join(
+                f"{r['spp']} spp mse {r['mse']:.3g} cpu {r['cpu_seconds']:.2f}"
+                for r in rows if r["scene"] == name and r["variant"] == variant))
+    write_report(args, rows, checks, hashes)
+
+
+def write_report(args, rows, checks, hashes):
+    out = os.path.join(ROOT, args.out)
+    os.makedirs(out, exist_ok=True)
+    with open(os.path.join(out, "efficiency.csv"), "w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows(rows)
+    base = {(r["scene"], r["spp"]): r for r in rows if r["variant"] == "before"}
+    lines = ["# Efficiency before and after", "",
+             f"Generated by `python3 scripts/bench/efficiency.py --before OLD/yscene"
+             f"{' --quick' if args.quick else ''}` on {time.strftime('%Y-%m-%d %H:%M')} "
+             f"(2 cores; the load average is in efficiency.csv). Do not edit: rerun the command.",
+             "", f"Binaries: before = {args.commits.split()[0] if args.commits else hashes['before']}, "
+             f"after = {args.commits.split()[1] if args.commits else hashes['after']}. "
+             f"Every render: 31 bounces, no clamp, seed 1, {args.threads} threads; CPU seconds "
+             f"of the render (all threads, load and BVH build excluded), median of {args.runs} "
+             "run(s). MSE against the mean of both binaries' references "
+             f"({args.reference_spp} spp each, as four renders of different seeds), minus the "
+             "references' own noise. Efficiency = 1 / (MSE · CPU-s); the ratio is against "
+             "`before` at the same spp.", "",
+             "## The image is unchanged in expectation", "",
+             "| scene | pixels | mean before | mean after | difference (standard errors) | "
+             "squared difference / summed noise |", "|---|---:|---:|---:|---:|---:|"]
+    for c in checks:
+        lines.append(f"| {c['scene']} | {c['resolution']} | {c['mean_before']:.5f} | "
+                     f"{c['mean_after']:.5f} | {c['z']:+.2f} | {c['ratio']:.3f} |")
+    lines += ["", "A ratio near 1 means the two references differ by their noise alone.", ""]
+    for name in dict.fromkeys(r["scene"] for r in rows):
+        lines += [f"## {name}", "",
+                  "| variant | spp | CPU-s per spp | MSE | efficiency | × before |",
+                  "|---|---:|---:|---:|---:|---:|"]
+        for r in rows:
+            if r["scene"] != name:
+                continue
+            b = base.get((name, r["spp"]))
+            gain = f"{r['efficiency'] / b['efficiency']:.2f}" if b else ""
+            lines.append(f"| {r['variant']} | {r['spp']} | {r['cpu_per_spp']:.4f} | "
+                         f"{r['mse']:.4g} | {r['efficiency']:.4g} | {gain} |")
+        lines.append("")
+    with open(os.path.join(out, "efficiency.md"), "w") as f:
+        f.write("\n".join(lines))
+    log(f"wrote {os.path.join(args.out, 'efficiency.md')}")
+
+
+if __name__ == "__main__":
+    main()
