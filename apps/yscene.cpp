@@ -573,8 +573,8 @@ static int run_main(int argc, const char** argv) {
   auto hair_params   = hair_style_params{};
   auto hair_material_params = hair_material{};
   auto hair = app.add_subcommand("hair", "generate a hair scene or stand-in hair geometry");
-  hair->add_option("--style", hair_opts.style, "straight, curly, curls or block")
-      ->check(CLI::IsMember({"straight", "curly", "curls", "block"}));
+  hair->add_option("--style", hair_opts.style, "straight, curly, curls, block or fur")
+      ->check(CLI::IsMember(hair_style_names));
   hair->add_option("--strands,-n", hair_params.strands, "number of strands")
       ->check(CLI::Range(1, 50000000));
   hair->add_option("--segments", hair_params.segments, "Bezier segments per strand (0: style default)")

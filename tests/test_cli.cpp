@@ -230,6 +230,17 @@ TEST(cli, hair_counts_beyond_int_indices_are_errors_before_allocating) {
   EXPECT_TRUE(list_files(dir).empty());
 }
 
+TEST(cli, hair_fur_style_writes_a_scene) {
+  auto dir    = make_test_dir("fur");
+  auto result = run_yscene("hair --style fur --strands 200 --output " + (dir / "fur.json").string());
+  EXPECT_EQ(result.status, 0) << result.output;
+  EXPECT_NE(result.output.find("600 Bezier segments"), std::string::npos) << result.output;
+  EXPECT_TRUE(fs::is_regular_file(dir / "fur.json"));
+  EXPECT_TRUE(fs::is_regular_file(dir / "shapes/hair.ply"));
+  EXPECT_TRUE(fs::is_regular_file(dir / "shapes/ball.ply"));
+  fs::remove_all(dir);
+}
+
 TEST(cli, threads_one_and_two_give_the_same_image) {
   auto dir = make_test_dir("threads");
   ASSERT_EQ(run_yscene("hair --style curly --strands 200 -o " + (dir / "hair.json").string()).status, 0);

@@ -96,6 +96,7 @@ static int stand_in_strands(hair_style style) {
     case hair_style::curly: return 1500;
     case hair_style::curls: return 400;
     case hair_style::block: return 2000;
+    case hair_style::fur: break;  // no scene file's hair is a fur ball
   }
   return 0;
 }

@@ -127,7 +127,7 @@ TEST(render, hair_r_lobe_follows_the_mirror_reflection_at_h) {
 
 TEST(render, every_style_renders_without_nan_or_inf) {
   for (auto style : {hair_style::straight, hair_style::curly, hair_style::curls,
-           hair_style::block}) {
+           hair_style::block, hair_style::fur}) {
     auto params       = hair_style_params{};
     params.style      = style;
     params.strands    = 300;
@@ -167,6 +167,67 @@ TEST(render, generator_is_deterministic_and_strands_are_chained) {
     auto root = a.radius[a.curves[s * per_strand].x];
     auto tip  = a.radius[a.curves[s * per_strand + per_strand - 1].w];
     EXPECT_NEAR(tip / root, 0.2f, 1e-5f);
+  }
+}
+
+// The benchmark fur ball: straight strands on the unit sphere, tilted at
+// most 30 degrees off the normal, 0.35 long within 15%, 0.01 to 0.002 thick.
+TEST(render, fur_style_is_a_ball_of_straight_strands) {
+  auto params    = hair_style_params{};
+  params.style   = hair_style::fur;
+  params.strands = 2000;
+  auto shape     = make_hair_strands(params);
+  ASSERT_EQ(hair_strand_segments(params), 3);
+  ASSERT_EQ(shape.curves.size(), 2000 * 3);
+  auto mean_root = vec3f{0, 0, 0};
+  for (auto s = 0; s < params.strands; s++) {
+    auto root      = shape.positions[shape.curves[s * 3].x];
+    auto tip       = shape.positions[shape.curves[s * 3 + 2].w];
+    auto direction = normalize(tip - root);
+    EXPECT_NEAR(length(root), 1, 1e-4f) << s;
+    EXPECT_GE(length(tip - root), 0.35f * 0.85f - 1e-4f) << s;
+    EXPECT_LE(length(tip - root), 0.35f * 1.15f + 1e-4f) << s;
+    EXPECT_LE(degrees(std::acos(std::min(dot(direction, normalize(root)), 1.0f))), 30.01f) << s;
+    // Straight: every control point on the root-tip line.
+    for (auto k = 0; k < 3; k++) {
+      auto curve = shape.curves[s * 3 + k];
+      for (auto i : {curve.x, curve.y, curve.z, curve.w}) {
+        auto q = shape.positions[i] - root;
+        EXPECT_LT(length(q - dot(q, direction) * direction), 1e-5f) << s;
+      }
+    }
+    EXPECT_FLOAT_EQ(shape.radius[shape.curves[s * 3].x], 0.01f) << s;
+    EXPECT_FLOAT_EQ(shape.radius[shape.curves[s * 3 + 2].w], 0.002f) << s;
+    mean_root += root;
+  }
+  // Uniform roots: each coordinate's mean has a standard deviation of
+  // 1 / sqrt(3 * 2000) = 0.013, so the mean is within 0.05 unless the roots
+  // cluster.
+  EXPECT_LT(length(mean_root / (float)params.strands), 0.05f);
+
+  auto scene = make_hair_scene(params, hair_material{});
+  ASSERT_EQ(scene.instances.size(), 2);
+  EXPECT_EQ(scene.instances[0].frame, identity3x4f);
+  EXPECT_EQ(scene.materials[scene.instances[0].material].type, material_type::hair);
+  auto& ball = scene.materials[scene.instances[1].material];
+  EXPECT_EQ(ball.type, material_type::matte);
+  EXPECT_EQ(ball.color, (vec3f{0.5f, 0.5f, 0.5f}));
+  EXPECT_NEAR(max_component(compute_bounds(scene.shapes[scene.instances[1].shape]).max), 1, 1e-4f);
+  ASSERT_EQ(scene.environments.size(), 1);
+  EXPECT_EQ(scene.environments[0].emission, (vec3f{1, 1, 1}));
+  EXPECT_EQ(scene.environments[0].emission_tex, -1);
+  EXPECT_TRUE(scene.textures.empty());
+  // The camera looks at the ball, and the farthest tip still lands inside the
+  // frame.
+  ASSERT_EQ(scene.cameras.size(), 1);
+  auto& camera = scene.cameras[0];
+  auto  centre = project_camera_point(camera, {0, 0, 0});
+  EXPECT_NEAR(centre.x, 0.5f, 1e-5f);
+  EXPECT_NEAR(centre.y, 0.5f, 1e-5f);
+  for (auto& p : shape.positions) {
+    auto uv = project_camera_point(camera, p);
+    EXPECT_GT(std::min(uv.x, uv.y), 0.02f);
+    EXPECT_LT(std::max(uv.x, uv.y), 0.98f);
   }
 }
 

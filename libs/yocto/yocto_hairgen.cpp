@@ -111,14 +111,30 @@ static std::vector<vec3f> make_block_fiber(rng_state& rng, int index, int count,
   return points;
 }
 
+// A strand of the fur ball: straight from a root on the unit sphere, tilted
+// up to 30 degrees away from the normal, 0.35 long give or take 15%.
+static std::vector<vec3f> make_fur_strand(rng_state& rng, int npoints) {
+  auto normal        = sample_sphere(rand2f(rng));
+  auto strand_length = 0.35f * (0.85f + 0.3f * rand1f(rng));
+  auto tilt          = radians(30.0f) * rand1f(rng);
+  auto azimuth       = 2 * pif * rand1f(rng);
+  auto basis         = basis_fromz(normal);
+  auto direction     = (basis[0] * std::cos(azimuth) + basis[1] * std::sin(azimuth)) *
+                       std::sin(tilt) + normal * std::cos(tilt);
+  auto points = std::vector<vec3f>{};
+  for (auto k = 0; k < npoints; k++)
+    points.push_back(normal + direction * (strand_length * k / (npoints - 1)));
+  return points;
+}
+
 int hair_strand_segments(const hair_style_params& params) {
-  auto defaults = std::array<int, 4>{8, 24, 40, 1};
+  auto defaults = std::array<int, 5>{8, 24, 40, 1, 3};
   return params.segments > 0 ? params.segments : defaults[(int)params.style];
 }
 
 shape_data make_hair_strands(const hair_style_params& params) {
   auto shape    = shape_data{};
-  auto radii    = std::array<float, 4>{0.012f, 0.01f, 0.008f, 0.003f};
+  auto radii    = std::array<float, 5>{0.012f, 0.01f, 0.008f, 0.003f, 0.01f};
   auto style    = (int)params.style;
   auto segments = hair_strand_segments(params);
   auto radius   = params.radius > 0 ? params.radius : radii[style];
@@ -137,6 +153,7 @@ shape_data make_hair_strands(const hair_style_params& params) {
       case hair_style::block:
         points = make_block_fiber(rng, s, params.strands, npoints);
         break;
+      case hair_style::fur: points = make_fur_strand(rng, npoints); break;
     }
     // Radius tapering linearly from the root to a fifth at the tip (blocks
     // of fibers keep theirs).
@@ -202,14 +219,28 @@ scene_data make_hair_scene(const hair_style_params& params, const hair_material&
       camera.focus  = 3.6f;
       sky_frame     = {{1, 0, 0}, {0, 0, 1}, {0, -1, 0}, {0, 0, 0}};
       break;
+    case hair_style::fur:
+      // 36 deg: the fur's reach (1.4025 at most, 16.3 deg off the axis at 5
+      // units) spans 90% of the frame.
+      camera.frame  = lookat_frame({0, 0, 5}, {0, 0, 0}, {0, 1, 0});
+      camera.aspect = 1;
+      camera.lens   = 0.036f / 2 / std::tan(radians(36.0f) / 2);
+      camera.focus  = 5;
+      break;
   }
   scene.cameras.push_back(camera);
   scene.camera_names.push_back("default");
 
-  scene.textures.push_back(make_sky_texture(512, 256, {-0.4f, 0.6f, 0.7f}));
-  scene.texture_names.push_back("sky");
-  scene.environments.push_back({sky_frame, {1, 1, 1}, 0});
-  scene.environment_names.push_back("sky");
+  if (params.style == hair_style::fur) {
+    // A plain white environment: the benchmark's lighting, no texture lookups.
+    scene.environments.push_back({identity3x4f, {1, 1, 1}, -1});
+    scene.environment_names.push_back("white");
+  } else {
+    scene.textures.push_back(make_sky_texture(512, 256, {-0.4f, 0.6f, 0.7f}));
+    scene.texture_names.push_back("sky");
+    scene.environments.push_back({sky_frame, {1, 1, 1}, 0});
+    scene.environment_names.push_back("sky");
+  }
 
   scene.shapes.push_back(make_hair_strands(params));
   scene.shape_names.push_back("hair");
@@ -246,11 +277,16 @@ scene_data make_hair_scene(const hair_style_params& params, const hair_material&
     return scene;
   }
   // Head styles face +z; the camera looks from +z at the back of the head.
-  auto turn = params.style == hair_style::block ? identity3x4f
-                                                : rotation_frame({0, 1, 0}, pif);
+  auto head = params.style == hair_style::straight || params.style == hair_style::curly;
+  auto turn = head ? rotation_frame({0, 1, 0}, pif) : identity3x4f;
   add_instance("hair", turn, 0, add_material("hair", hair_material_data));
   auto solid = material_data{};
-  if (params.style == hair_style::block) {
+  if (params.style == hair_style::fur) {
+    solid.color = {0.5f, 0.5f, 0.5f};
+    scene.shapes.push_back(make_sphere_shape(128, 1));
+    scene.shape_names.push_back("ball");
+    add_instance("ball", identity3x4f, 1, add_material("ball", solid));
+  } else if (params.style == hair_style::block) {
     solid.color = {0.2f, 0.8f, 0.3f};
     scene.shapes.push_back(make_sphere_shape(96, 0.5f));
     scene.shape_names.push_back("sphere");

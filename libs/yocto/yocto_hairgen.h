@@ -3,13 +3,15 @@
 //
 // Deterministic hair geometry in the styles of the thesis's scenes (straight
 // hair on a head-sized sphere, curly hair, a lock of curls, a block of
-// fibers) as chains of cubic Bezier segments with a radius tapering towards
-// the tip, and complete scenes around them with a procedural sky. The head
-// styles use the frame of Cem Yuksel's hair models (y up, scalp centred near
-// (0, 10, 0), about 12 units across), the lock of curls that of Bitterli's
-// hair-curl model (hanging from (-4, 11.5, 0)), the block pbrt's hair block
-// (the unit cube, fibers along z): stand-ins land where real scene files'
-// cameras expect the real geometry.
+// fibers) and of a benchmark fur ball, as chains of cubic Bezier segments
+// with a radius tapering towards the tip, and complete scenes around them
+// with a procedural sky (a plain white environment for the fur ball). The
+// head styles use the frame of Cem Yuksel's hair models (y up, scalp centred
+// near (0, 10, 0), about 12 units across), the lock of curls that of
+// Bitterli's hair-curl model (hanging from (-4, 11.5, 0)), the block pbrt's
+// hair block (the unit cube, fibers along z): stand-ins land where real scene
+// files' cameras expect the real geometry. The fur ball's short straight
+// strands grow from the unit sphere at the origin.
 //
 
 #ifndef YOCTO_HAIRGEN_H_
@@ -25,9 +27,9 @@
 // -----------------------------------------------------------------------------
 namespace yocto {
 
-enum struct hair_style { straight, curly, curls, block };
-inline const auto hair_style_names = std::array<std::string, 4>{
-    "straight", "curly", "curls", "block"};
+enum struct hair_style { straight, curly, curls, block, fur };
+inline const auto hair_style_names = std::array<std::string, 5>{
+    "straight", "curly", "curls", "block", "fur"};
 
 struct hair_style_params {
   hair_style style    = hair_style::straight;
@@ -54,7 +56,8 @@ inline const float hair_head_radius = 5.2f;
 texture_data make_sky_texture(int width, int height, const vec3f& sun_direction);
 
 // A complete scene: camera, sky environment, the strands with a hair
-// material, and the head sphere (head styles) or a floor (block).
+// material, and the head sphere (head styles), a sphere beside the block, or
+// the grey unit sphere under the fur in a white environment (fur).
 scene_data make_hair_scene(const hair_style_params& params, const hair_material& hair);
 
 // Writes curves in pbrt's syntax (`Shape "curve"`, one per Bezier segment,
