@@ -226,7 +226,7 @@ static int run_render(const render_options& options, trace_params params,
   bvh_params_.compact       = options.bvh_compact;
   if (!make_scene_bvh(bvh, scene, bvh_params_, error))
     return print_error(options.scene + ": " + error);
-  auto context = make_trace_context(scene);
+  auto context = make_trace_context(scene, params);
   if (options.embree_only) return run_raycast(options, scene, bvh, context, params);
   auto state  = trace_state{};
   init_trace_state(state, scene, params);
@@ -509,6 +509,8 @@ static int run_main(int argc, const char** argv) {
   auto render_opts = render_options{};
   auto params      = trace_params{};
   auto sampler     = std::string{"path"};
+  auto lights      = std::string{"automatic"};
+  auto sequence    = std::string{"sobol"};
   auto render      = app.add_subcommand("render", "render a scene to an image");
   render->add_option("scene", render_opts.scene, "scene (json, pbrt or hair)")->required();
   render->add_option("--output,-o", render_opts.output, "output image (exr, hdr, pfm, png, jpg)")
@@ -517,6 +519,15 @@ static int run_main(int argc, const char** argv) {
   render->add_option("--resolution,-r", params.resolution, "largest image side in pixels");
   render->add_option("--sampler", sampler, "path (MIS) or naive (BSDF sampling only)")
       ->check(CLI::IsMember({"path", "naive"}));
+  render->add_option("--lights", lights,
+          "lights sampled by path: automatic (those BSDF sampling does not find as well) or all")
+      ->check(CLI::IsMember({"automatic", "all"}));
+  render->add_option("--sequence", sequence,
+          "random numbers of a pixel: sobol (Owen-scrambled) or independent")
+      ->check(CLI::IsMember({"sobol", "independent"}));
+  render->add_option("--sobol-bounces", params.sobol_bounces,
+          "bounces drawing Sobol numbers (independent numbers after them)")
+      ->check(CLI::NonNegativeNumber);
   render->add_option("--bounces,-b", params.bounces, "maximum scattering events per path (pbrt's maxdepth)");
   render->add_option("--threads,-t", params.threads, "threads (0 = all cores)");
   render->add_option("--seed", params.seed, "random seed");
@@ -620,6 +631,8 @@ static int run_main(int argc, const char** argv) {
 
   if (render->parsed()) {
     params.sampler = sampler == "naive" ? trace_sampler_type::naive : trace_sampler_type::path;
+    params.lights  = lights == "all" ? trace_lights_type::all : trace_lights_type::automatic;
+    params.sequence = sequence == "independent" ? sequence_type::independent : sequence_type::sobol;
     return run_render(render_opts, params, *render);
   } else if (info->parsed()) {
     return run_info(info_scene);
