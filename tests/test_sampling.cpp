@@ -308,17 +308,12 @@ TEST(sampling, sequences_are_uniform) {
   EXPECT_GT(p[2], 0.001) << "independent xy";
 }
 
-// Disabled: fails on the Laine-Karras hash of Burley 2020, listing 2
-// (laine_karras_permutation), whose seed enters by one addition only, so
-// that the scrambles of sibling strata are not independent (see
-// DISABLED_sobol_substrata_are_independent). 4096 pixels x 16 samples of
-// pairs 0..15 for seeds 1, 7, 2024; tolerance p > 0.001 on each of 144
-// histograms. Measured: 5 of the 96 one-dimensional histograms fail (none
-// of the 48 two-dimensional ones), worst p = 8.4e-8 (pair 5, seed 2024, x:
-// chi-square 140.7 for 63 degrees of freedom); with the hash of Vegdahl 2021 (x ^= x * 0x3d20adea; x += seed;
-// x *= (seed >> 16) | 1; x ^= x * 0x05526c56; x ^= x * 0x53a22864) the worst
-// p is 0.25. Run with --gtest_also_run_disabled_tests.
-TEST(sampling, DISABLED_sobol_is_uniform_over_pixels_of_16_samples) {
+// 4096 pixels x 16 samples of pairs 0..15 for seeds 1, 7, 2024; tolerance
+// p > 0.001 on each of 144 histograms. With Burley 2020's listing-2 hash (the
+// seed enters by one addition only) 5 of the 96 one-dimensional histograms
+// failed, worst p = 8.4e-8 (pair 5, seed 2024, x: chi-square 140.7 for 63
+// degrees of freedom); with Vegdahl 2021's hash (the header's) the worst p is 0.25.
+TEST(sampling, sobol_is_uniform_over_pixels_of_16_samples) {
   for (auto seed : {(uint64_t)1, (uint64_t)7, (uint64_t)2024}) {
     for (auto pair = 0; pair < 16; pair++) {
       auto p = uniformity_pvalues(sequence_type::sobol, seed, pair, 0, 16);
@@ -329,19 +324,19 @@ TEST(sampling, DISABLED_sobol_is_uniform_over_pixels_of_16_samples) {
   }
 }
 
-// Disabled: fails on laine_karras_permutation, see above. In an Owen
-// scramble every node of the tree of strata flips its digit independently,
-// so where the point of a pixel's stratum [c/16, (c+1)/16) lies among its
-// four sub-strata of width 1/64 is independent from stratum to stratum. The
-// listing-2 hash adds the seed and then applies one fixed permutation, so
-// the top d digits of nested_uniform_scramble take only 2^d forms over all
-// seeds (an Owen scramble has 2^(2^d - 1)): the sub-stratum in stratum 1
-// (or 9) is then nearly a function of the one in stratum 0.
-// 4096 pixels x 16 samples; chi-square of the 4 x 4 joint histogram of the
-// two sub-strata (15 degrees of freedom, 256 expected counts per cell),
-// tolerance p > 0.001. Measured chi-square: 4100-4130 for strata (0, 1),
-// 7100-7470 for (0, 9), p = 0; with the hash of Vegdahl 2021: 7-24, p >= 0.067.
-TEST(sampling, DISABLED_sobol_substrata_are_independent) {
+// In an Owen scramble every node of the tree of strata flips its digit
+// independently, so where the point of a pixel's stratum [c/16, (c+1)/16)
+// lies among its four sub-strata of width 1/64 is independent from stratum
+// to stratum. Burley 2020's listing-2 hash adds the seed and then applies
+// one fixed permutation, so the top d digits of nested_uniform_scramble take
+// only 2^d forms over all seeds (an Owen scramble has 2^(2^d - 1)): the
+// sub-stratum in stratum 1 (or 9) was nearly a function of the one in
+// stratum 0. 4096 pixels x 16 samples; chi-square of the 4 x 4 joint
+// histogram of the two sub-strata (15 degrees of freedom, 256 expected
+// counts per cell), tolerance p > 0.001. Measured chi-square: 4100-4130 for
+// strata (0, 1), 7100-7470 for (0, 9) with listing 2 (p = 0); with
+// Vegdahl 2021's hash: 7-24, p >= 0.067.
+TEST(sampling, sobol_substrata_are_independent) {
   for (auto pair : {0, 5, 40}) {
     for (auto axis : {0, 1}) {
       auto joint01 = std::vector<int>(16), joint09 = std::vector<int>(16);

@@ -100,17 +100,19 @@ inline uint32_t sobol_dimension1(uint32_t index) {
   return result;
 }
 
-// Burley 2020, listing 2: a hash in which every bit is changed only as a
-// function of the bits below it (additions and products with even constants
-// carry upwards only), so that on bit-reversed numbers it is an Owen
-// scramble (Laine and Karras, Stratified Sampling for Stochastic
-// Transparency, 2011).
+// A hash in which every bit is changed only as a function of the bits below
+// it (additions and products carry upwards only), so that on bit-reversed
+// numbers it is an Owen scramble (Laine and Karras, Stratified Sampling for
+// Stochastic Transparency, 2011). The constants are Vegdahl's (Building a
+// Better LK Hash, 2021): Burley's listing 2 lets the seed in by one addition
+// only, so the top d digits take 2^d forms over all seeds instead of
+// 2^(2^d - 1), and sub-strata of a pixel stay correlated (test_sampling).
 inline uint32_t laine_karras_permutation(uint32_t x, uint32_t seed) {
+  x ^= x * 0x3d20adeau;
   x += seed;
-  x ^= x * 0x6c50b47cu;
-  x ^= x * 0xb82f1e52u;
-  x ^= x * 0xc7afe638u;
-  x ^= x * 0x8d22f6e6u;
+  x *= (seed >> 16) | 1u;
+  x ^= x * 0x05526c56u;
+  x ^= x * 0x53a22864u;
   return x;
 }
 
@@ -126,8 +128,8 @@ inline float fixed_to_float(uint32_t x) { return (x >> 8) * (1.0f / 16777216.0f)
 
 // Point `index` of a shuffled, Owen-scrambled 2D Sobol sequence (Burley
 // 2020, section 4): the same seed gives one (0,2)-sequence, other seeds
-// give statistically independent ones, so that every pair of dimensions of
-// a path is stratified without a table of higher Sobol dimensions.
+// independent ones, so that every pair of dimensions of a path is
+// stratified without a table of higher Sobol dimensions.
 // The scrambles work on bit-reversed values, and dimension 0 is the reversed
 // index itself: reverse_bits(laine_karras_permutation(shuffled, seed)) is
 // nested_uniform_scramble(sobol_dimension0(shuffled), seed) with two
