@@ -528,6 +528,9 @@ static int run_main(int argc, const char** argv) {
   render->add_option("--sobol-bounces", params.sobol_bounces,
           "bounces drawing Sobol numbers (independent numbers after them)")
       ->check(CLI::NonNegativeNumber);
+  render->add_option("--roulette-bounce", params.roulette_bounce,
+          "first bounce where Russian roulette may end a path that lost energy")
+      ->check(CLI::NonNegativeNumber);
   render->add_option("--bounces,-b", params.bounces, "maximum scattering events per path (pbrt's maxdepth)");
   render->add_option("--threads,-t", params.threads, "threads (0 = all cores)");
   render->add_option("--seed", params.seed, "random seed");

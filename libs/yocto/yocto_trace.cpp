@@ -491,7 +491,7 @@ static vec3f trace_path(const scene_data& scene, const scene_bvh& bvh,
     // a path that carries all of it (a white fiber) would gain variance and
     // nothing else (as pbrt does). Unbiased either way.
     auto survive = max_component(weight);
-    if (bounce >= 3 && survive < 1) {
+    if (bounce >= params.roulette_bounce && survive < 1) {
       if (lobe_roulette.y >= survive) break;
       weight /= survive;
     }

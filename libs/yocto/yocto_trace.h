@@ -1,12 +1,15 @@
 //
 // # Yocto/Trace: a path tracer for hair scenes
 //
-// `path` samples the BSDF and, at every bounce, one light (environment, area
-// light or distant light) with a shadow ray, combining the two with multiple
-// importance sampling (power heuristic); `naive` samples the BSDF only. Hair
-// is shaded with Yocto/Hair at line and curve hits. Each pixel sample's random
-// numbers depend only on (seed, pixel, sample index), so images do not depend
-// on the number of threads.
+// `path` samples the BSDF and, at every bounce, one light (textured
+// environment, area light or distant light; a constant environment is left to
+// BSDF sampling, which finds it as well without a shadow ray) with a shadow
+// ray, combining the two with multiple importance sampling (power heuristic);
+// `naive` samples the BSDF only. Hair is shaded with Yocto/Hair at line and
+// curve hits. Each pixel sample's random numbers are Owen-scrambled Sobol
+// pairs at fixed dimensions per bounce (or independent numbers) and depend
+// only on (seed, pixel, sample index): images do not depend on the number of
+// threads, and any range of samples renders alone.
 //
 
 #ifndef YOCTO_TRACE_H_
@@ -43,6 +46,7 @@ struct trace_params {
   int                sobol_bounces = 32;  // bounces with Sobol numbers, then independent
   int                samples    = 64;
   int                bounces    = 32;    // scattering events per path (pbrt maxdepth)
+  int                roulette_bounce = 3;  // first bounce with Russian roulette
   float              clamp      = 100;   // max sample value, 0 for none
   uint64_t           seed       = 961748941;
   int                threads    = 0;     // 0 for all cores
