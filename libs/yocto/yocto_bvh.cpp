@@ -96,6 +96,86 @@ static RTCGeometry make_curve_geometry(
   return geometry;
 }
 
+// Pieces of each Bezier segment: as many as make the control polygon's
+// distance from the chord (which bounds the curve's) small against the
+// radius; the distance falls with the square of the number of pieces.
+static bvh_curve_pieces make_curve_pieces(const shape_data& shape, int max_pieces) {
+  auto pieces = bvh_curve_pieces{};
+  if (shape.curves.empty() || max_pieces <= 1) return pieces;
+  auto count = (int)shape.positions.size();
+  auto split = false;
+  pieces.first.reserve(shape.curves.size() + 1);
+  for (auto& c : shape.curves) {
+    pieces.first.push_back((int)pieces.element.size());
+    auto n = 1;
+    if (!glm::any(glm::lessThan(c, vec4i{0})) &&
+        !glm::any(glm::greaterThanEqual(c, vec4i{count}))) {
+      auto& p     = shape.positions;
+      auto  chord = p[c.w] - p[c.x];
+      auto  along = dot(chord, chord) > 0 ? normalize(chord) : vec3f{0, 0, 0};
+      auto  off   = [&](const vec3f& q) {
+        auto d = q - p[c.x];
+        return length(d - dot(d, along) * along);
+      };
+      auto bend   = std::max(off(p[c.y]), off(p[c.z]));
+      auto radius = 0.0f;
+      for (auto k = 0; k < 4; k++)
+        radius = std::max(radius, c[k] < (int)shape.radius.size() ? shape.radius[c[k]] : 0.001f);
+      // One piece per factor 2 of bend over radius, squared (about 3 pieces
+      // for a quarter turn of a curl, 1 for a straight segment).
+      auto ratio = radius > 0 ? bend / (2 * radius) : 0.0f;
+      if (std::isfinite(ratio) && ratio > 1)
+        n = std::clamp((int)std::ceil(std::sqrt(ratio)), 1, max_pieces);
+    }
+    split = split || n > 1;
+    for (auto k = 0; k < n; k++) pieces.element.push_back((int)(&c - shape.curves.data()));
+  }
+  pieces.first.push_back((int)pieces.element.size());
+  if (!split) return {};
+  return pieces;
+}
+
+// Round Bezier curves from the pieces of each segment: the same polynomial
+// over [k / n, (k + 1) / n] has control points B(a), B(a) + (b - a) B'(a) / 3,
+// B(b) - (b - a) B'(b) / 3, B(b), with the radius as a fourth coordinate.
+static RTCGeometry make_curve_pieces_geometry(RTCDevice device, const shape_data& shape,
+    const bvh_curve_pieces& pieces, RTCGeometryType type) {
+  auto geometry = rtcNewGeometry(device, type);
+  auto npieces  = pieces.element.size();
+  auto vertices = (vec4f*)rtcSetNewGeometryBuffer(geometry, RTC_BUFFER_TYPE_VERTEX, 0,
+      RTC_FORMAT_FLOAT4, sizeof(vec4f), npieces * 4);
+  auto indices = (uint32_t*)rtcSetNewGeometryBuffer(geometry, RTC_BUFFER_TYPE_INDEX, 0,
+      RTC_FORMAT_UINT, sizeof(uint32_t), npieces);
+  auto count = (int)shape.positions.size();
+  for (size_t i = 0; i < npieces; i++) {
+    auto  element = pieces.element[i];
+    auto  c       = shape.curves[element];
+    auto  n       = pieces.first[element + 1] - pieces.first[element];
+    auto  k       = (int)i - pieces.first[element];
+    indices[i]    = (uint32_t)(i * 4);
+    if (glm::any(glm::lessThan(c, vec4i{0})) || glm::any(glm::greaterThanEqual(c, vec4i{count}))) {
+      for (auto j = 0; j < 4; j++) vertices[i * 4 + j] = {0, 0, 0, 0};
+      continue;
+    }
+    auto q = std::array<vec4f, 4>{fiber_vertex(shape, c.x), fiber_vertex(shape, c.y),
+        fiber_vertex(shape, c.z), fiber_vertex(shape, c.w)};
+    auto point = [&](float u) {
+      auto v = 1 - u;
+      return v * v * v * q[0] + 3 * v * v * u * q[1] + 3 * v * u * u * q[2] + u * u * u * q[3];
+    };
+    auto derivative = [&](float u) {
+      auto v = 1 - u;
+      return 3 * v * v * (q[1] - q[0]) + 6 * v * u * (q[2] - q[1]) + 3 * u * u * (q[3] - q[2]);
+    };
+    auto a = (float)k / n, b = (float)(k + 1) / n, d = (b - a) / 3;
+    vertices[i * 4 + 0] = k == 0 ? q[0] : point(a);
+    vertices[i * 4 + 1] = point(a) + d * derivative(a);
+    vertices[i * 4 + 2] = point(b) - d * derivative(b);
+    vertices[i * 4 + 3] = k == n - 1 ? q[3] : point(b);
+  }
+  return geometry;
+}
+
 static RTCGeometry make_triangle_geometry(RTCDevice device, const shape_data& shape) {
   auto geometry = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_TRIANGLE);
   auto vertices = (vec3f*)rtcSetNewGeometryBuffer(geometry, RTC_BUFFER_TYPE_VERTEX, 0,
@@ -108,10 +188,14 @@ static RTCGeometry make_triangle_geometry(RTCDevice device, const shape_data& sh
 }
 
 // The geometry of a shape, committed; null for an empty shape.
-static RTCGeometry make_shape_geometry(
-    RTCDevice device, const shape_data& shape, const bvh_params& params) {
+static RTCGeometry make_shape_geometry(RTCDevice device, const shape_data& shape,
+    const bvh_curve_pieces& pieces, const bvh_params& params) {
   auto geometry = RTCGeometry{nullptr};
-  if (!shape.triangles.empty()) {
+  if (!pieces.element.empty()) {
+    geometry = make_curve_pieces_geometry(device, shape, pieces,
+        params.flat_curves ? RTC_GEOMETRY_TYPE_FLAT_BEZIER_CURVE
+                           : RTC_GEOMETRY_TYPE_ROUND_BEZIER_CURVE);
+  } else if (!shape.triangles.empty()) {
     geometry = make_triangle_geometry(device, shape);
   } else if (!shape.lines.empty()) {
     geometry = make_curve_geometry(device, shape, shape.lines,
@@ -135,11 +219,11 @@ static void set_scene_quality(RTCScene scene, const bvh_params& params) {
                                            : RTC_BUILD_QUALITY_LOW);
 }
 
-static RTCScene make_shape_scene(
-    RTCDevice device, const shape_data& shape, const bvh_params& params) {
+static RTCScene make_shape_scene(RTCDevice device, const shape_data& shape,
+    const bvh_curve_pieces& pieces, const bvh_params& params) {
   auto scene = rtcNewScene(device);
   set_scene_quality(scene, params);
-  if (auto geometry = make_shape_geometry(device, shape, params)) {
+  if (auto geometry = make_shape_geometry(device, shape, pieces, params)) {
     rtcAttachGeometryByID(scene, geometry, 0);
     rtcReleaseGeometry(geometry);
   }
@@ -182,10 +266,15 @@ bool make_scene_bvh(scene_bvh& bvh, const scene_data& scene, const bvh_params& p
 
   auto release_scene = [device_ref = bvh.device](void* s) { rtcReleaseScene((RTCScene)s); };
   bvh.shapes.resize(scene.shapes.size());
+  bvh.pieces.resize(scene.shapes.size());
+  for (auto i = 0; i < (int)scene.shapes.size(); i++)
+    if (users[i] > 0) bvh.pieces[i] = make_curve_pieces(scene.shapes[i], params.max_curve_pieces);
   for (auto& instance : scene.instances) {
+    bvh.instance_shapes.push_back(instance.shape);
     if (is_flat(instance) || bvh.shapes[instance.shape]) continue;
     bvh.shapes[instance.shape] = std::shared_ptr<void>(
-        make_shape_scene(device, scene.shapes[instance.shape], params), release_scene);
+        make_shape_scene(device, scene.shapes[instance.shape], bvh.pieces[instance.shape],
+            params), release_scene);
   }
   auto top = rtcNewScene(device);
   bvh.scene = std::shared_ptr<void>(top, release_scene);
@@ -195,7 +284,8 @@ bool make_scene_bvh(scene_bvh& bvh, const scene_data& scene, const bvh_params& p
     auto& instance = scene.instances[i];
     auto  geometry = RTCGeometry{nullptr};
     if (is_flat(instance)) {
-      geometry = make_shape_geometry(device, scene.shapes[instance.shape], params);
+      geometry = make_shape_geometry(
+          device, scene.shapes[instance.shape], bvh.pieces[instance.shape], params);
       if (!geometry) continue;
     } else {
       geometry = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_INSTANCE);
@@ -251,6 +341,16 @@ scene_intersection intersect_scene_bvh(const scene_bvh& bvh, const ray3f& ray) {
                                     : rayhit.hit.geomID);
   intersection.element  = (int)rayhit.hit.primID;
   intersection.uv       = {rayhit.hit.u, rayhit.hit.v};
+  // A piece of a split segment: the segment and its own parameter.
+  auto& pieces = bvh.pieces[bvh.instance_shapes[intersection.instance]];
+  if (!pieces.element.empty()) {
+    auto element  = pieces.element[intersection.element];
+    auto first    = pieces.first[element];
+    auto n        = pieces.first[element + 1] - first;
+    intersection.element = element;
+    intersection.uv.x    = std::min(
+        (intersection.uv.x + (float)((int)rayhit.hit.primID - first)) / n, 1.0f);
+  }
   intersection.distance = rayhit.ray.tfar;
   intersection.hit      = true;
   return intersection;

@@ -6,8 +6,10 @@
 // in a top-level scene. An instance with the identity frame whose shape no
 // other instance uses is put in the top-level scene directly (one traversal
 // level less, the common case of hair scenes); others are Embree instances of
-// a per-shape scene. Intersections return the instance, the
-// element and Embree's parametric coordinates; fiber geometry at a hit (tangent,
+// a per-shape scene. Bent Bezier segments are split into exact pieces for
+// Embree (bvh_params::max_curve_pieces). Intersections return the instance,
+// the element and Embree's parametric coordinates (mapped back from a piece
+// to its segment); fiber geometry at a hit (tangent,
 // radius, signed offset h) is computed by `eval_fiber_point` in yocto_scene.
 //
 
@@ -35,7 +37,19 @@ struct bvh_params {
   bool compact     = false;  // Embree's compact layout: less memory, a bit slower
   bool flatten     = true;   // identity instances of unshared shapes without instancing
   bvh_quality_type quality = bvh_quality_type::high;  // Embree's build quality
+  // Bent Bezier segments are given to Embree as up to this many exact pieces
+  // (the same curve), fewer for straighter ones, none for straight ones:
+  // Embree's bounds of a bent segment are loose, and a ray tests it often.
+  int max_curve_pieces = 4;
   std::string embree_config = "";  // Embree device configuration, e.g. "verbose=2"
+};
+
+// Where the pieces of a curves shape come from: piece i is part of element
+// `element[i]`, which starts at piece `first[element[i]]` and has
+// first[element + 1] - first[element] equal pieces. Empty when not split.
+struct bvh_curve_pieces {
+  std::vector<int> element = {};
+  std::vector<int> first   = {};
 };
 
 // Embree handles are shared pointers so that the struct copies and frees
@@ -44,6 +58,8 @@ struct scene_bvh {
   std::shared_ptr<void>              device = nullptr;
   std::shared_ptr<void>              scene  = nullptr;
   std::vector<std::shared_ptr<void>> shapes = {};
+  std::vector<bvh_curve_pieces>      pieces = {};           // per shape
+  std::vector<int>                   instance_shapes = {};  // per instance
   std::shared_ptr<std::atomic<int64_t>> memory      = nullptr;
   int64_t                                 peak_memory = 0;
   double                                  build_seconds = 0;
