@@ -125,6 +125,7 @@ struct render_options {
   std::string bvh_quality = "high";    // Embree build quality
   std::string embree_config = "";      // Embree device configuration
   bool        bvh_compact   = false;   // Embree's compact BVH
+  int         curve_pieces  = 4;       // most exact pieces of a bent Bezier segment
 };
 
 // OUTPUT with "-NNNNNspp" before the extension.
@@ -224,6 +225,7 @@ static int run_render(const render_options& options, trace_params params,
                                            bvh_quality_names.begin());
   bvh_params_.embree_config = options.embree_config;
   bvh_params_.compact       = options.bvh_compact;
+  bvh_params_.max_curve_pieces = options.curve_pieces;
   if (!make_scene_bvh(bvh, scene, bvh_params_, error))
     return print_error(options.scene + ": " + error);
   auto context = make_trace_context(scene, params);
@@ -531,6 +533,9 @@ static int run_main(int argc, const char** argv) {
   render->add_option("--roulette-bounce", params.roulette_bounce,
           "first bounce where Russian roulette may end a path that lost energy")
       ->check(CLI::NonNegativeNumber);
+  render->add_option("--shadow-threshold", params.shadow_threshold,
+          "light samples that would add less than this play a roulette for their shadow ray")
+      ->check(CLI::NonNegativeNumber);
   render->add_option("--bounces,-b", params.bounces, "maximum scattering events per path (pbrt's maxdepth)");
   render->add_option("--threads,-t", params.threads, "threads (0 = all cores)");
   render->add_option("--seed", params.seed, "random seed");
@@ -561,6 +566,9 @@ static int run_main(int argc, const char** argv) {
       ->check(CLI::IsMember({"low", "medium", "high"}));
   render->add_option("--embree-config", render_opts.embree_config,
       "Embree device configuration (e.g. verbose=2 prints the BVH Embree builds)");
+  render->add_option("--curve-pieces", render_opts.curve_pieces,
+          "give Embree bent Bezier segments as up to this many exact pieces (1: never)")
+      ->check(CLI::Range(1, 16));
   render->add_flag("--bvh-compact", render_opts.bvh_compact,
       "Embree's compact BVH layout (less memory, slower)");
   render->add_flag("--stats", render_opts.stats, "print a machine-readable line of figures");

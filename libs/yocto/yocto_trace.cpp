@@ -178,18 +178,38 @@ trace_context make_trace_context(const scene_data& scene, const trace_params& pa
     if (environment.emission_tex < 0 && params.lights == trace_lights_type::automatic) continue;
     auto light        = trace_light{};
     light.environment = i;
+    light.radiance    = max_component(environment.emission);
     if (environment.emission_tex >= 0) {
+      // MIS compensation (Karlik et al., MIS Compensation: Optimizing
+      // Sampling Techniques in Multiple Importance Sampling, 2019): light
+      // samples go where the sky is above its average, proportionally to the
+      // excess; BSDF samples, which MIS weighs fully where the light pdf is
+      // 0, find the rest. A sky of one value is left to BSDF sampling.
       auto& texture = scene.textures[environment.emission_tex];
-      auto  total   = 0.0f;
+      auto  average = 0.0, weights = 0.0;
+      for (auto j = 0; j < texture.height; j++) {
+        auto sin_theta = std::sin((j + 0.5f) * pif / texture.height);
+        for (auto k = 0; k < texture.width; k++) {
+          average += std::max(max_component(texture.pixels[(size_t)j * texture.width + k]),
+                         0.0f) * sin_theta;
+          weights += sin_theta;
+        }
+      }
+      average /= std::max(weights, 1e-30);
+      light.radiance = (float)average * max_component(environment.emission);
+      auto offset = params.lights == trace_lights_type::automatic ? (float)average : 0.0f;
+      auto total  = 0.0f;
       for (auto j = 0; j < texture.height; j++) {
         auto sin_theta = std::sin((j + 0.5f) * pif / texture.height);
         for (auto k = 0; k < texture.width; k++) {
           auto value = max_component(texture.pixels[(size_t)j * texture.width + k]);
-          total += std::max(value, 0.0f) * sin_theta;
+          total += std::max(value - offset, 0.0f) * sin_theta;
           light.cdf.push_back(total);
         }
       }
-      if (total <= 0) continue;
+      // Nothing above the average (well above rounding): a constant sky.
+      if (!(total > 1e-6f * std::max((float)average, 1e-30f) * texture.width * texture.height))
+        continue;
     }
     context.environment_light[i] = (int)context.lights.size();
     context.lights.push_back(light);
@@ -357,6 +377,40 @@ static ray3f spawn_ray(const trace_point& point, const vec3f& direction) {
   return {o, direction, 0, flt_max};
 }
 
+// What a light sample brings if nothing occludes it: its emission, the
+// solid-angle pdf of choosing the light and the sample, and whether the light
+// is a delta (distant) light, which takes no MIS weight.
+struct trace_light_value {
+  vec3f emission = {0, 0, 0};
+  float pdf      = 0;
+  bool  delta    = false;
+};
+static float area_light_pdf(const scene_data& scene, const trace_context& context,
+    int instance, float distance, float cos_light);
+static trace_light_value eval_light_sample(const scene_data& scene,
+    const trace_context& context, const trace_light& light, const light_sample& sample,
+    const vec3f& incoming) {
+  auto nlights = (float)context.lights.size();
+  if (light.instance >= 0) {
+    if (dot(sample.gnormal, incoming) >= 0) return {};  // the light's back
+    auto& material = scene.materials[scene.instances[light.instance].material];
+    auto  emission = material.emission;
+    if (material.emission_tex >= 0)
+      emission *= eval_texture(scene.textures[material.emission_tex], sample.uv);
+    return {emission, area_light_pdf(scene, context, light.instance, sample.distance,
+                          -dot(sample.gnormal, incoming)), false};
+  } else if (light.environment >= 0) {
+    // The sampled texture coordinates give emission and pdf directly.
+    auto& environment = scene.environments[light.environment];
+    if (environment.emission_tex < 0) return {environment.emission, 1 / (4 * pif) / nlights};
+    return {environment.emission * eval_environment_texture(
+                                       scene.textures[environment.emission_tex], sample.uv),
+        environment_texture_pdf(scene, light, sample.uv) / nlights, false};
+  } else {
+    return {scene.distant_lights[light.distant].emission, 1 / nlights, true};
+  }
+}
+
 // Solid-angle pdf that light sampling would have produced for a BSDF ray that
 // hit an area light (at distance, with cosine at the light) or escaped.
 static float area_light_pdf(const scene_data& scene, const trace_context& context,
@@ -368,16 +422,16 @@ static float area_light_pdf(const scene_data& scene, const trace_context& contex
 }
 
 // The dimensions of a pixel sample, in pairs: the pixel position and the
-// lens, then five pairs per bounce (light choice and light element, point on
-// the light, glossy lobe and roulette, BSDF direction, and two more numbers
-// for hair sampled with four). Fixed positions keep every bounce's numbers
+// lens, then six pairs per bounce (light choice and light element, point on
+// the light, glossy lobe and roulette, BSDF direction, two more numbers for
+// hair sampled with four, and the shadow-ray roulette). Fixed positions keep every bounce's numbers
 // stratified across the samples of a pixel, whatever the path did before.
 enum trace_pair {
   trace_pair_pixel = 0, trace_pair_lens = 1,
   trace_pair_light = 0, trace_pair_light_point = 1, trace_pair_lobe_roulette = 2,
-  trace_pair_direction = 3, trace_pair_direction_more = 4,
+  trace_pair_direction = 3, trace_pair_direction_more = 4, trace_pair_shadow = 5,
 };
-static int trace_bounce_pairs(int bounce) { return 2 + 5 * bounce; }
+static int trace_bounce_pairs(int bounce) { return 2 + 6 * bounce; }
 
 // The path tracer; when `record` is not null, every ray cast is appended to it.
 // A path scatters at most params.bounces times (pbrt's maxdepth): the ray
@@ -422,53 +476,32 @@ static vec3f trace_path(const scene_data& scene, const scene_bvh& bvh,
       auto  ruv     = sample_sequence2f(sequence, pairs + trace_pair_light_point);
       auto  sample  = sample_light(scene, light, point.position, rel, ruv);
       auto  incoming = sample.incoming;
-      // The BSDF is evaluated only for visible light samples, the shadow ray
-      // skipped only where it is zero for certain.
+      // The shadow ray is cast only for a sample that would add light if
+      // visible; a sky sample that would add little (below
+      // params.shadow_threshold times the sky's average radiance, the value
+      // of a white surface under it) survives a roulette with probability
+      // proportional to what it adds, and is weighted up when it does, so
+      // that the estimate is unbiased.
       if (incoming != vec3f{0, 0, 0} && may_scatter(point, outgoing, incoming)) {
-        auto shadow   = spawn_ray(point, incoming);
-        auto emission = vec3f{0, 0, 0};
-        auto pdf      = 0.0f;
-        auto delta    = false;
-        if (light.instance >= 0) {
-          // Visibility of the sampled point itself (stopping just short of
-          // it): a light may hide part of itself (a sphere's far side).
-          shadow.tmax = length(sample.position - shadow.o) * (1 - 1e-3f);
-          if (record) record->push_back({shadow, true});
-          auto& instance = scene.instances[light.instance];
-          auto& material = scene.materials[instance.material];
-          if (dot(sample.gnormal, incoming) < 0 && !intersect_scene_bvh_any(bvh, shadow)) {
-            emission = material.emission;
-            if (material.emission_tex >= 0)
-              emission *= eval_texture(scene.textures[material.emission_tex], sample.uv);
-            pdf = area_light_pdf(scene, context, light.instance, sample.distance,
-                -dot(sample.gnormal, incoming));
-          }
-        } else {
-          if (record) record->push_back({shadow, true});
-          if (intersect_scene_bvh_any(bvh, shadow)) {
-            // occluded: no light
-          } else if (light.environment >= 0) {
-            // The sampled texture coordinates give emission and pdf directly.
-            auto& environment = scene.environments[light.environment];
-            if (environment.emission_tex >= 0) {
-              emission = environment.emission *
-                         eval_environment_texture(scene.textures[environment.emission_tex], sample.uv);
-              pdf = environment_texture_pdf(scene, light, sample.uv) / nlights;
-            } else {
-              emission = environment.emission;
-              pdf      = 1 / (4 * pif) / nlights;
-            }
-          } else {
-            emission = scene.distant_lights[light.distant].emission;
-            pdf      = 1.0f / nlights;
-            delta    = true;
-          }
-        }
-        rays++;
+        auto [emission, pdf, delta] = eval_light_sample(scene, context, light, sample, incoming);
         if (pdf > 0 && emission != vec3f{0, 0, 0}) {
           auto [bsdfcos, scatter_pdf] = eval_bsdfcos_and_pdf(point, outgoing, incoming);
-          auto mis = delta ? 1.0f : power_heuristic(pdf, scatter_pdf);
-          radiance += weight * bsdfcos * emission * (mis / pdf);
+          auto mis      = delta ? 1.0f : power_heuristic(pdf, scatter_pdf);
+          auto contribution = weight * bsdfcos * emission * (mis / pdf);
+          auto value    = max_component(contribution);
+          auto threshold = params.shadow_threshold * light.radiance;
+          auto survive  = value > 0 && value < threshold ? value / threshold : 1.0f;
+          if (value > 0 &&
+              (survive == 1 || sample_sequence2f(sequence, pairs + trace_pair_shadow).x < survive)) {
+            auto shadow = spawn_ray(point, incoming);
+            // Area lights: visibility of the sampled point itself (stopping
+            // just short of it), as a light may hide part of itself.
+            if (light.instance >= 0)
+              shadow.tmax = length(sample.position - shadow.o) * (1 - 1e-3f);
+            if (record) record->push_back({shadow, true});
+            rays++;
+            if (!intersect_scene_bvh_any(bvh, shadow)) radiance += contribution / survive;
+          }
         }
       }
     }

@@ -47,6 +47,9 @@ struct trace_params {
   int                samples    = 64;
   int                bounces    = 32;    // scattering events per path (pbrt maxdepth)
   int                roulette_bounce = 3;  // first bounce with Russian roulette
+  // Sky samples that would add less than this times the sky's average
+  // radiance play a roulette for their shadow ray (0 for none).
+  float              shadow_threshold = 0.1f;
   float              clamp      = 100;   // max sample value, 0 for none
   uint64_t           seed       = 961748941;
   int                threads    = 0;     // 0 for all cores
@@ -70,6 +73,7 @@ struct trace_light {
   int                environment = -1;
   int                distant     = -1;
   std::vector<float> cdf         = {};
+  float              radiance    = 0;  // environments: average radiance (else 0)
 };
 
 // What the tracer precomputes once per scene: the lights to sample and the

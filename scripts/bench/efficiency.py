@@ -54,6 +54,14 @@ VARIANTS = [
     ("after-naive", "after", ["--sampler", "naive"]),
     ("after-four-sobol", "after", ["--hair-four-numbers"]),
     ("after-four-independent", "after", ["--hair-four-numbers", "--sequence", "independent"]),
+    ("after-roulette-1", "after", ["--roulette-bounce", "1"]),
+    ("after-roulette-2", "after", ["--roulette-bounce", "2"]),
+    ("after-roulette-3", "after", ["--roulette-bounce", "3"]),
+    ("after-lights-all-shadow-0.1", "after", ["--lights", "all", "--shadow-threshold", "0.1"]),
+    ("after-shadow-0.02", "after", ["--shadow-threshold", "0.02"]),
+    ("after-shadow-0.1", "after", ["--shadow-threshold", "0.1"]),
+    ("after-shadow-0.5", "after", ["--shadow-threshold", "0.5"]),
+    ("after-roulette-8", "after", ["--roulette-bounce", "8"]),
 ]
 CHECKPOINTS = [16, 64, 256]
 
@@ -135,7 +143,12 @@ def main():
     parser.add_argument("--threads", type=int, default=2)
     parser.add_argument("--quick", action="store_true",
                         help="quarter resolution, 256-spp references, one run")
+    parser.add_argument("--resolution-scale", type=float, default=1,
+                        help="scale of every scene's resolution")
     parser.add_argument("--out", default="docs/benchmark")
+    parser.add_argument("--before-reference-only", action="store_true",
+                        help="score against the before binary's reference alone (for quick "
+                        "iterations: the after binary's reference is not rendered)")
     parser.add_argument("--commits", default="", help="'BEFORE AFTER' commit ids for the report")
     args = parser.parse_args()
     if args.quick:
@@ -149,20 +162,25 @@ def main():
     rows, checks = [], []
     for name in args.scenes:
         scene = scene_path(name, binaries["after"])
-        resolution = SCENES[name][1] // (4 if args.quick else 1)
+        resolution = int(SCENES[name][1] * args.resolution_scale) // (4 if args.quick else 1)
         log(f"{name}: references at {resolution} px")
         quarter = args.reference_spp // 4
+        tags = ["before"] if args.before_reference_only else ["before", "after"]
         refs = {tag: reference(binaries[tag], hashes[tag], name, scene, resolution, quarter,
                                [seed + 100 * (i + 1) for seed in range(1, 5)], 0, cache)
-                for i, tag in enumerate(["before", "after"])}
-        ratio, z, mean_before, mean_after = compare_references(refs["before"], refs["after"])
-        checks.append({"scene": name, "resolution": resolution, "ratio": ratio, "z": z,
-                       "mean_before": mean_before, "mean_after": mean_after})
-        truth = {"size": refs["before"]["size"],
-                 "mean": array("d", [(x + y) / 2 for x, y in zip(refs["before"]["mean"],
-                                                                  refs["after"]["mean"])])}
-        truth_noise = (sum(refs["before"]["variance"]) + sum(refs["after"]["variance"])) / 4 / \
-            len(truth["mean"])
+                for i, tag in enumerate(tags)}
+        if args.before_reference_only:
+            truth = refs["before"]
+            truth_noise = sum(truth["variance"]) / len(truth["mean"])
+        else:
+            ratio, z, mean_before, mean_after = compare_references(refs["before"], refs["after"])
+            checks.append({"scene": name, "resolution": resolution, "ratio": ratio, "z": z,
+                           "mean_before": mean_before, "mean_after": mean_after})
+            truth = {"size": refs["before"]["size"],
+                     "mean": array("d", [(x + y) / 2 for x, y in zip(refs["before"]["mean"],
+                                                                      refs["after"]["mean"])])}
+            truth_noise = (sum(refs["before"]["variance"]) +
+                           sum(refs["after"]["variance"])) / 4 / len(truth["mean"])
         for variant, tag, flags in VARIANTS:
             if variant not in args.variants:
                 continue
