@@ -568,7 +568,7 @@ static int run_main(int argc, const char** argv) {
       "Embree device configuration (e.g. verbose=2 prints the BVH Embree builds)");
   render->add_option("--curve-pieces", render_opts.curve_pieces,
           "give Embree bent Bezier segments as up to this many exact pieces (1: never)")
-      ->check(CLI::Range(1, 16));
+      ->check(CLI::Range(1, 4));
   render->add_flag("--bvh-compact", render_opts.bvh_compact,
       "Embree's compact BVH layout (less memory, slower)");
   render->add_flag("--stats", render_opts.stats, "print a machine-readable line of figures");

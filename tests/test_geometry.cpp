@@ -318,9 +318,9 @@ TEST(bvh, bent_curves_split_into_exact_pieces_hit_like_whole_ones) {
     auto error = std::string{};
     ASSERT_TRUE(make_scene_bvh(whole, scene, whole_params, error)) << error;
     ASSERT_TRUE(make_scene_bvh(split, scene, split_params, error)) << error;
-    EXPECT_TRUE(whole.pieces[0].element.empty());
-    EXPECT_GT(split.pieces[0].element.size(), curly.curves.size());
-    EXPECT_TRUE(split.pieces[1].element.empty());  // straight: not split
+    EXPECT_TRUE(whole.pieces[0].pieces.empty());
+    EXPECT_GT(split.pieces[0].pieces.size(), curly.curves.size());
+    EXPECT_TRUE(split.pieces[1].pieces.empty());  // straight: not split
     auto rng = make_rng(17);
     auto hits = 0, disagree = 0;
     for (auto i = 0; i < 20000; i++) {

@@ -101,12 +101,12 @@ static RTCGeometry make_curve_geometry(
 // radius; the distance falls with the square of the number of pieces.
 static bvh_curve_pieces make_curve_pieces(const shape_data& shape, int max_pieces) {
   auto pieces = bvh_curve_pieces{};
-  if (shape.curves.empty() || max_pieces <= 1) return pieces;
+  max_pieces  = std::min(max_pieces, 4);  // k and n - 1 take 2 bits each
+  if (shape.curves.empty() || max_pieces <= 1 || shape.curves.size() >= (1u << 28))
+    return pieces;
   auto count = (int)shape.positions.size();
   auto split = false;
-  pieces.first.reserve(shape.curves.size() + 1);
   for (auto& c : shape.curves) {
-    pieces.first.push_back((int)pieces.element.size());
     auto n = 1;
     if (!glm::any(glm::lessThan(c, vec4i{0})) &&
         !glm::any(glm::greaterThanEqual(c, vec4i{count}))) {
@@ -128,9 +128,9 @@ static bvh_curve_pieces make_curve_pieces(const shape_data& shape, int max_piece
         n = std::clamp((int)std::ceil(std::sqrt(ratio)), 1, max_pieces);
     }
     split = split || n > 1;
-    for (auto k = 0; k < n; k++) pieces.element.push_back((int)(&c - shape.curves.data()));
+    auto element = (uint32_t)(&c - shape.curves.data());
+    for (auto k = 0; k < n; k++) pieces.pieces.push_back(element << 4 | k << 2 | (n - 1));
   }
-  pieces.first.push_back((int)pieces.element.size());
   if (!split) return {};
   return pieces;
 }
@@ -141,17 +141,16 @@ static bvh_curve_pieces make_curve_pieces(const shape_data& shape, int max_piece
 static RTCGeometry make_curve_pieces_geometry(RTCDevice device, const shape_data& shape,
     const bvh_curve_pieces& pieces, RTCGeometryType type) {
   auto geometry = rtcNewGeometry(device, type);
-  auto npieces  = pieces.element.size();
+  auto npieces  = pieces.pieces.size();
   auto vertices = (vec4f*)rtcSetNewGeometryBuffer(geometry, RTC_BUFFER_TYPE_VERTEX, 0,
       RTC_FORMAT_FLOAT4, sizeof(vec4f), npieces * 4);
   auto indices = (uint32_t*)rtcSetNewGeometryBuffer(geometry, RTC_BUFFER_TYPE_INDEX, 0,
       RTC_FORMAT_UINT, sizeof(uint32_t), npieces);
   auto count = (int)shape.positions.size();
   for (size_t i = 0; i < npieces; i++) {
-    auto  element = pieces.element[i];
-    auto  c       = shape.curves[element];
-    auto  n       = pieces.first[element + 1] - pieces.first[element];
-    auto  k       = (int)i - pieces.first[element];
+    auto  c       = shape.curves[pieces.pieces[i] >> 4];
+    auto  k       = (int)(pieces.pieces[i] >> 2 & 3);
+    auto  n       = (int)(pieces.pieces[i] & 3) + 1;
     indices[i]    = (uint32_t)(i * 4);
     if (glm::any(glm::lessThan(c, vec4i{0})) || glm::any(glm::greaterThanEqual(c, vec4i{count}))) {
       for (auto j = 0; j < 4; j++) vertices[i * 4 + j] = {0, 0, 0, 0};
@@ -191,7 +190,7 @@ static RTCGeometry make_triangle_geometry(RTCDevice device, const shape_data& sh
 static RTCGeometry make_shape_geometry(RTCDevice device, const shape_data& shape,
     const bvh_curve_pieces& pieces, const bvh_params& params) {
   auto geometry = RTCGeometry{nullptr};
-  if (!pieces.element.empty()) {
+  if (!pieces.pieces.empty()) {
     geometry = make_curve_pieces_geometry(device, shape, pieces,
         params.flat_curves ? RTC_GEOMETRY_TYPE_FLAT_BEZIER_CURVE
                            : RTC_GEOMETRY_TYPE_ROUND_BEZIER_CURVE);
@@ -342,14 +341,12 @@ scene_intersection intersect_scene_bvh(const scene_bvh& bvh, const ray3f& ray) {
   intersection.element  = (int)rayhit.hit.primID;
   intersection.uv       = {rayhit.hit.u, rayhit.hit.v};
   // A piece of a split segment: the segment and its own parameter.
-  auto& pieces = bvh.pieces[bvh.instance_shapes[intersection.instance]];
-  if (!pieces.element.empty()) {
-    auto element  = pieces.element[intersection.element];
-    auto first    = pieces.first[element];
-    auto n        = pieces.first[element + 1] - first;
-    intersection.element = element;
+  auto& pieces = bvh.pieces[bvh.instance_shapes[intersection.instance]].pieces;
+  if (!pieces.empty()) {
+    auto piece           = pieces[intersection.element];
+    intersection.element = (int)(piece >> 4);
     intersection.uv.x    = std::min(
-        (intersection.uv.x + (float)((int)rayhit.hit.primID - first)) / n, 1.0f);
+        (intersection.uv.x + (float)(piece >> 2 & 3)) / (float)((piece & 3) + 1), 1.0f);
   }
   intersection.distance = rayhit.ray.tfar;
   intersection.hit      = true;

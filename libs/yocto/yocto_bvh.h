@@ -38,18 +38,17 @@ struct bvh_params {
   bool flatten     = true;   // identity instances of unshared shapes without instancing
   bvh_quality_type quality = bvh_quality_type::high;  // Embree's build quality
   // Bent Bezier segments are given to Embree as up to this many exact pieces
-  // (the same curve), fewer for straighter ones, none for straight ones:
-  // Embree's bounds of a bent segment are loose, and a ray tests it often.
+  // (the same curve; 1 to 4), fewer for straighter ones, none for straight
+  // ones: Embree's bounds of a bent segment are loose, and rays test it often.
   int max_curve_pieces = 4;
   std::string embree_config = "";  // Embree device configuration, e.g. "verbose=2"
 };
 
-// Where the pieces of a curves shape come from: piece i is part of element
-// `element[i]`, which starts at piece `first[element[i]]` and has
-// first[element + 1] - first[element] equal pieces. Empty when not split.
+// Where the pieces of a curves shape come from: piece i is the k-th of n
+// equal parts of segment e, packed as e << 4 | k << 2 | (n - 1) (one load
+// per hit). Empty when nothing is split.
 struct bvh_curve_pieces {
-  std::vector<int> element = {};
-  std::vector<int> first   = {};
+  std::vector<uint32_t> pieces = {};
 };
 
 // Embree handles are shared pointers so that the struct copies and frees

@@ -46,7 +46,7 @@ struct trace_params {
   int                sobol_bounces = 32;  // bounces with Sobol numbers, then independent
   int                samples    = 64;
   int                bounces    = 32;    // scattering events per path (pbrt maxdepth)
-  int                roulette_bounce = 3;  // first bounce with Russian roulette
+  int                roulette_bounce = 1;  // first bounce with Russian roulette
   // Sky samples that would add less than this times the sky's average
   // radiance play a roulette for their shadow ray (0 for none).
   float              shadow_threshold = 0.1f;

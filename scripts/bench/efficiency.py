@@ -57,11 +57,10 @@ VARIANTS = [
     ("after-roulette-1", "after", ["--roulette-bounce", "1"]),
     ("after-roulette-2", "after", ["--roulette-bounce", "2"]),
     ("after-roulette-3", "after", ["--roulette-bounce", "3"]),
-    ("after-lights-all-shadow-0.1", "after", ["--lights", "all", "--shadow-threshold", "0.1"]),
-    ("after-shadow-0.02", "after", ["--shadow-threshold", "0.02"]),
+    ("after-shadow-0", "after", ["--shadow-threshold", "0"]),
     ("after-shadow-0.1", "after", ["--shadow-threshold", "0.1"]),
-    ("after-shadow-0.5", "after", ["--shadow-threshold", "0.5"]),
-    ("after-roulette-8", "after", ["--roulette-bounce", "8"]),
+    ("after-shadow-0.3", "after", ["--shadow-threshold", "0.3"]),
+    ("after-whole-curves", "after", ["--curve-pieces", "1"]),
 ]
 CHECKPOINTS = [16, 64, 256]
 
