@@ -43,24 +43,30 @@ SCENES = {
     "curly-hair": ("scenes/curly-hair/curly-hair.json", 128),
 }
 
-# name, binary ("before" or "after"), yscene render arguments.
+# name, binary ("before" or "after"), yscene render arguments. `before` is
+# the previous default; each `after-...` variant turns one lever of the new
+# default back (or changes the hair's random numbers, for the thesis's claim).
 VARIANTS = [
     ("before", "before", []),
     ("before-naive", "before", ["--sampler", "naive"]),
     ("after", "after", []),
     ("after-independent", "after", ["--sequence", "independent"]),
     ("after-lights-all", "after", ["--lights", "all"]),
-    ("after-independent-lights-all", "after", ["--sequence", "independent", "--lights", "all"]),
-    ("after-naive", "after", ["--sampler", "naive"]),
+    ("after-whole-curves", "after", ["--curve-pieces", "1"]),
+    ("after-shadow-0", "after", ["--shadow-threshold", "0"]),
+    ("after-roulette-3", "after", ["--roulette-bounce", "3"]),
     ("after-four-sobol", "after", ["--hair-four-numbers"]),
     ("after-four-independent", "after", ["--hair-four-numbers", "--sequence", "independent"]),
-    ("after-roulette-1", "after", ["--roulette-bounce", "1"]),
-    ("after-roulette-2", "after", ["--roulette-bounce", "2"]),
-    ("after-roulette-3", "after", ["--roulette-bounce", "3"]),
-    ("after-shadow-0", "after", ["--shadow-threshold", "0"]),
-    ("after-shadow-0.1", "after", ["--shadow-threshold", "0.1"]),
-    ("after-shadow-0.3", "after", ["--shadow-threshold", "0.3"]),
-    ("after-whole-curves", "after", ["--curve-pieces", "1"]),
+]
+# The two defaults are timed --headline-runs times, the levers --runs times.
+HEADLINE = ["before", "after"]
+# What each lever is, as the variant that turns it back.
+LEVERS = [
+    ("Sobol numbers (against independent ones)", "after-independent"),
+    ("light choice: constant sky to BSDF sampling, MIS compensation", "after-lights-all"),
+    ("bent curves in exact pieces", "after-whole-curves"),
+    ("shadow-ray roulette", "after-shadow-0"),
+    ("Russian roulette from bounce 1 (against 3)", "after-roulette-3"),
 ]
 CHECKPOINTS = [16, 64, 256]
 
@@ -138,7 +144,9 @@ def main():
     parser.add_argument("--variants", nargs="*", default=[v[0] for v in VARIANTS])
     parser.add_argument("--reference-spp", type=int, default=1024,
                         help="spp of each reference (four renders of a quarter each)")
-    parser.add_argument("--runs", type=int, default=3, help="timed runs per variant (median)")
+    parser.add_argument("--runs", type=int, default=1, help="timed runs per variant (median)")
+    parser.add_argument("--headline-runs", type=int, default=3,
+                        help="timed runs of `before` and `after` (median)")
     parser.add_argument("--threads", type=int, default=2)
     parser.add_argument("--quick", action="store_true",
                         help="quarter resolution, 256-spp references, one run")
@@ -151,7 +159,7 @@ def main():
     parser.add_argument("--commits", default="", help="'BEFORE AFTER' commit ids for the report")
     args = parser.parse_args()
     if args.quick:
-        args.reference_spp, args.runs = 256, 1
+        args.reference_spp, args.runs, args.headline_runs = 256, 1, 1
     binaries = {"before": os.path.abspath(args.before), "after": os.path.abspath(args.after)}
     hashes = {k: file_hash(v) for k, v in binaries.items()}
     cache = os.path.join(ROOT, "out/bench/efficiency")
@@ -185,7 +193,7 @@ def main():
                 continue
             times = {spp: [] for spp in CHECKPOINTS}
             output = os.path.join(cache, f"{name}-{variant}-{hashes[tag]}-{resolution}.pfm")
-            for r in range(args.runs):
+            for r in range(args.headline_runs if variant in HEADLINE else args.runs):
                 _, points = render(binaries[tag], scene, output, CHECKPOINTS[-1], resolution, 1,
                                    args.threads, flags, checkpoints=True)
                 for point in points:
@@ -221,8 +229,8 @@ def write_report(args, rows, checks, hashes):
              "", f"Binaries: before = {args.commits.split()[0] if args.commits else hashes['before']}, "
              f"after = {args.commits.split()[1] if args.commits else hashes['after']}. "
              f"Every render: 31 bounces, no clamp, seed 1, {args.threads} threads; CPU seconds "
-             f"of the render (all threads, load and BVH build excluded), median of {args.runs} "
-             "run(s). MSE against the mean of both binaries' references "
+             f"of the render (all threads, load and BVH build excluded), median of "
+             f"{args.headline_runs} runs for `before` and `after`, {args.runs} for the others. MSE against the mean of both binaries' references "
              f"({args.reference_spp} spp each, as four renders of different seeds), minus the "
              "references' own noise. Efficiency = 1 / (MSE · CPU-s); the ratio is against "
              "`before` at the same spp.", "",
@@ -233,6 +241,44 @@ def write_report(args, rows, checks, hashes):
         lines.append(f"| {c['scene']} | {c['resolution']} | {c['mean_before']:.5f} | "
                      f"{c['mean_after']:.5f} | {c['z']:+.2f} | {c['ratio']:.3f} |")
     lines += ["", "A ratio near 1 means the two references differ by their noise alone.", ""]
+    table = {(r["scene"], r["variant"], r["spp"]): r for r in rows}
+    scenes = list(dict.fromkeys(r["scene"] for r in rows))
+
+    def gain(scene, a, b, spp):
+        if (scene, a, spp) in table and (scene, b, spp) in table:
+            return f"{table[(scene, a, spp)]['efficiency'] / table[(scene, b, spp)]['efficiency']:.2f}"
+        return ""
+    lines += ["## Summary: efficiency of the new default over the previous one", "",
+              "| scene | 16 spp | 64 spp | 256 spp | CPU-s per spp before → after (64 spp) |",
+              "|---|---:|---:|---:|---:|"]
+    for name in scenes:
+        cpu = ""
+        if (name, "before", 64) in table and (name, "after", 64) in table:
+            cpu = (f"{table[(name, 'before', 64)]['cpu_per_spp']:.3f} → "
+                   f"{table[(name, 'after', 64)]['cpu_per_spp']:.3f}")
+        lines.append(f"| {name} | " + " | ".join(gain(name, "after", "before", spp)
+                                                 for spp in CHECKPOINTS) + f" | {cpu} |")
+    lines += ["", "## Each lever's share at 64 spp", "",
+              "Efficiency of the new default over the default with one lever turned back "
+              "(above 1: the lever pays).", "",
+              "| lever | " + " | ".join(scenes) + " |", "|---|" + "---:|" * len(scenes)]
+    for label, variant in LEVERS:
+        lines.append(f"| {label} (`{variant}`) | " +
+                     " | ".join(gain(name, "after", variant, 64) for name in scenes) + " |")
+    lines += ["", "## The thesis's claim: two Sobol numbers demuxed into four", "",
+              "MSE of the hair's direction sampled from two numbers demuxed into four (the "
+              "default), from four Sobol dimensions, and from four independent numbers (with "
+              "independent numbers everywhere, where the demux has nothing to preserve).", "",
+              "| scene | spp | demux, Sobol | four Sobol | demux, independent | four independent |",
+              "|---|---:|---:|---:|---:|---:|"]
+    for name in scenes:
+        for spp in CHECKPOINTS:
+            values = [table.get((name, v, spp)) for v in
+                      ["after", "after-four-sobol", "after-independent", "after-four-independent"]]
+            if all(values):
+                lines.append(f"| {name} | {spp} | " +
+                             " | ".join(f"{v['mse']:.4g}" for v in values) + " |")
+    lines.append("")
     for name in dict.fromkeys(r["scene"] for r in rows):
         lines += [f"## {name}", "",
                   "| variant | spp | CPU-s per spp | MSE | efficiency | × before |",
