@@ -377,6 +377,16 @@ static ray3f spawn_ray(const trace_point& point, const vec3f& direction) {
   return {o, direction, 0, flt_max};
 }
 
+// Solid-angle pdf that light sampling would have produced for a BSDF ray that
+// hit an area light (at distance, with cosine at the light) or escaped.
+static float area_light_pdf(const scene_data& scene, const trace_context& context,
+    int instance, float distance, float cos_light) {
+  auto index = context.instance_light[instance];
+  if (index < 0 || cos_light <= 0) return 0;
+  auto area = context.lights[index].cdf.back();
+  return distance * distance / (cos_light * area) / context.lights.size();
+}
+
 // What a light sample brings if nothing occludes it: its emission, the
 // solid-angle pdf of choosing the light and the sample, and whether the light
 // is a delta (distant) light, which takes no MIS weight.
@@ -385,8 +395,6 @@ struct trace_light_value {
   float pdf      = 0;
   bool  delta    = false;
 };
-static float area_light_pdf(const scene_data& scene, const trace_context& context,
-    int instance, float distance, float cos_light);
 static trace_light_value eval_light_sample(const scene_data& scene,
     const trace_context& context, const trace_light& light, const light_sample& sample,
     const vec3f& incoming) {
@@ -411,21 +419,12 @@ static trace_light_value eval_light_sample(const scene_data& scene,
   }
 }
 
-// Solid-angle pdf that light sampling would have produced for a BSDF ray that
-// hit an area light (at distance, with cosine at the light) or escaped.
-static float area_light_pdf(const scene_data& scene, const trace_context& context,
-    int instance, float distance, float cos_light) {
-  auto index = context.instance_light[instance];
-  if (index < 0 || cos_light <= 0) return 0;
-  auto area = context.lights[index].cdf.back();
-  return distance * distance / (cos_light * area) / context.lights.size();
-}
-
 // The dimensions of a pixel sample, in pairs: the pixel position and the
 // lens, then six pairs per bounce (light choice and light element, point on
 // the light, glossy lobe and roulette, BSDF direction, two more numbers for
-// hair sampled with four, and the shadow-ray roulette). Fixed positions keep every bounce's numbers
-// stratified across the samples of a pixel, whatever the path did before.
+// hair sampled with four, and the shadow-ray roulette). Fixed positions keep
+// every bounce's numbers stratified across the samples of a pixel, whatever
+// the path did before.
 enum trace_pair {
   trace_pair_pixel = 0, trace_pair_lens = 1,
   trace_pair_light = 0, trace_pair_light_point = 1, trace_pair_lobe_roulette = 2,
