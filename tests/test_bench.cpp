@@ -74,8 +74,13 @@ TEST(bench, recording_rays_keeps_the_image_and_counts_every_ray) {
 
 TEST(bench, recorded_rays_are_the_same_at_one_and_two_threads) {
   auto  setup = make_setup();
-  auto& [scene, bvh, context, params] = setup;
-  auto  record = [&](int threads) {
+  // References, not a structured binding: lambdas may not capture those
+  // before C++20 (clang refuses).
+  auto& scene   = setup.scene;
+  auto& bvh     = setup.bvh;
+  auto& context = setup.context;
+  auto& params  = setup.params;
+  auto  record  = [&](int threads) {
     auto state    = trace_state{};
     auto tparams  = params;
     tparams.threads = threads;
@@ -135,9 +140,12 @@ TEST(bench, flat_and_instanced_bvh_find_the_same_hits) {
 }
 
 TEST(bench, per_hit_hair_terms_give_the_per_material_image) {
-  auto  setup = make_setup();
-  auto& [scene, bvh, context, params] = setup;
-  auto  render = [&](bool per_hit) {
+  auto  setup   = make_setup();
+  auto& scene   = setup.scene;
+  auto& bvh     = setup.bvh;
+  auto& context = setup.context;
+  auto& params  = setup.params;
+  auto  render  = [&](bool per_hit) {
     auto tparams         = params;
     tparams.hair_per_hit = per_hit;
     auto state           = trace_state{};
