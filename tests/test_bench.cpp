@@ -73,19 +73,16 @@ TEST(bench, recording_rays_keeps_the_image_and_counts_every_ray) {
 }
 
 TEST(bench, recorded_rays_are_the_same_at_one_and_two_threads) {
-  auto  setup = make_setup();
-  // References, not a structured binding: lambdas may not capture those
-  // before C++20 (clang refuses).
-  auto& scene   = setup.scene;
-  auto& bvh     = setup.bvh;
-  auto& context = setup.context;
-  auto& params  = setup.params;
-  auto  record  = [&](int threads) {
-    auto state    = trace_state{};
-    auto tparams  = params;
+  // The lambdas use setup's members: a structured binding cannot be
+  // captured before C++20 (clang refuses).
+  auto setup  = make_setup();
+  auto record = [&](int threads) {
+    auto state      = trace_state{};
+    auto tparams    = setup.params;
     tparams.threads = threads;
-    init_trace_state(state, scene, tparams);
-    return record_trace_rays(state, scene, bvh, context, tparams, tparams.samples);
+    init_trace_state(state, setup.scene, tparams);
+    return record_trace_rays(
+        state, setup.scene, setup.bvh, setup.context, tparams, tparams.samples);
   };
   auto one = record(1), two = record(2);
   ASSERT_EQ(one.size(), two.size());
@@ -140,17 +137,13 @@ TEST(bench, flat_and_instanced_bvh_find_the_same_hits) {
 }
 
 TEST(bench, per_hit_hair_terms_give_the_per_material_image) {
-  auto  setup   = make_setup();
-  auto& scene   = setup.scene;
-  auto& bvh     = setup.bvh;
-  auto& context = setup.context;
-  auto& params  = setup.params;
-  auto  render  = [&](bool per_hit) {
-    auto tparams         = params;
+  auto setup  = make_setup();
+  auto render = [&](bool per_hit) {
+    auto tparams         = setup.params;
     tparams.hair_per_hit = per_hit;
     auto state           = trace_state{};
-    init_trace_state(state, scene, tparams);
-    trace_samples(state, scene, bvh, context, tparams, tparams.samples);
+    init_trace_state(state, setup.scene, tparams);
+    trace_samples(state, setup.scene, setup.bvh, setup.context, tparams, tparams.samples);
     return get_image(state);
   };
   EXPECT_EQ(render(true).pixels, render(false).pixels);
