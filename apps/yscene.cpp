@@ -63,6 +63,13 @@ static std::string format_count(double count) {
   return buffer;
 }
 
+// The enum value of a name from its names table (the command line has
+// checked that the name is in it).
+template <typename Enum, size_t size>
+static Enum enum_from_name(const std::array<std::string, size>& names, const std::string& name) {
+  return (Enum)(std::find(names.begin(), names.end(), name) - names.begin());
+}
+
 // Peak resident memory of this process in bytes.
 static int64_t peak_memory() {
   auto usage = rusage{};
@@ -220,9 +227,8 @@ static int run_render(const render_options& options, trace_params params,
   auto bvh_params_ = bvh_params{};
   bvh_params_.flat_curves = options.flat_curves;
   bvh_params_.flatten     = !options.no_flatten;
-  bvh_params_.quality     = (bvh_quality_type)(std::find(bvh_quality_names.begin(),
-                                               bvh_quality_names.end(), options.bvh_quality) -
-                                           bvh_quality_names.begin());
+  bvh_params_.quality     = enum_from_name<bvh_quality_type>(bvh_quality_names,
+      options.bvh_quality);
   bvh_params_.embree_config = options.embree_config;
   bvh_params_.compact       = options.bvh_compact;
   bvh_params_.max_curve_pieces = options.curve_pieces;
@@ -440,8 +446,7 @@ static bool load_first_camera(const std::string& filename, camera_data& camera,
 
 static int run_hair(const hair_options& options, hair_style_params params,
     hair_material material) {
-  auto found = std::find(hair_style_names.begin(), hair_style_names.end(), options.style);
-  params.style = (hair_style)(found - hair_style_names.begin());
+  params.style = enum_from_name<hair_style>(hair_style_names, options.style);
   if (options.sigma_a.size() == 3) {
     material.has_sigma_a = true;
     material.sigma_a     = {options.sigma_a[0], options.sigma_a[1], options.sigma_a[2]};
@@ -520,13 +525,13 @@ static int run_main(int argc, const char** argv) {
   render->add_option("--samples,-s", params.samples, "samples per pixel");
   render->add_option("--resolution,-r", params.resolution, "largest image side in pixels");
   render->add_option("--sampler", sampler, "path (MIS) or naive (BSDF sampling only)")
-      ->check(CLI::IsMember({"path", "naive"}));
+      ->check(CLI::IsMember(trace_sampler_names));
   render->add_option("--lights", lights,
           "lights sampled by path: automatic (those BSDF sampling does not find as well) or all")
-      ->check(CLI::IsMember({"automatic", "all"}));
+      ->check(CLI::IsMember(trace_lights_names));
   render->add_option("--sequence", sequence,
           "random numbers of a pixel: sobol (Owen-scrambled) or independent")
-      ->check(CLI::IsMember({"sobol", "independent"}));
+      ->check(CLI::IsMember(sequence_names));
   render->add_option("--sobol-bounces", params.sobol_bounces,
           "bounces drawing Sobol numbers (independent numbers after them)")
       ->check(CLI::NonNegativeNumber);
@@ -641,9 +646,9 @@ static int run_main(int argc, const char** argv) {
   }
 
   if (render->parsed()) {
-    params.sampler = sampler == "naive" ? trace_sampler_type::naive : trace_sampler_type::path;
-    params.lights  = lights == "all" ? trace_lights_type::all : trace_lights_type::automatic;
-    params.sequence = sequence == "independent" ? sequence_type::independent : sequence_type::sobol;
+    params.sampler  = enum_from_name<trace_sampler_type>(trace_sampler_names, sampler);
+    params.lights   = enum_from_name<trace_lights_type>(trace_lights_names, lights);
+    params.sequence = enum_from_name<sequence_type>(sequence_names, sequence);
     return run_render(render_opts, params, *render);
   } else if (info->parsed()) {
     return run_info(info_scene);

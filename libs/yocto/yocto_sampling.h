@@ -91,13 +91,17 @@ inline uint32_t reverse_bits(uint32_t x) {
 // van der Corput radical inverse, and the dimension whose generator matrix
 // is Pascal's triangle mod 2 (each direction number is the previous one xor
 // itself shifted right). Together a (0,2)-sequence in base 2.
+// Dimension 1 is generated bit-reversed, as the scrambles below use it.
 inline uint32_t sobol_dimension0(uint32_t index) { return reverse_bits(index); }
-inline uint32_t sobol_dimension1(uint32_t index) {
+inline uint32_t sobol_dimension1_reversed(uint32_t index) {
   auto result = 0u;
-  for (auto direction = 1u << 31; index != 0; index >>= 1, direction ^= direction >> 1) {
+  for (auto direction = 1u; index != 0; index >>= 1, direction ^= direction << 1) {
     if (index & 1) result ^= direction;
   }
   return result;
+}
+inline uint32_t sobol_dimension1(uint32_t index) {
+  return reverse_bits(sobol_dimension1_reversed(index));
 }
 
 // A hash in which every bit is changed only as a function of the bits below
@@ -133,17 +137,14 @@ inline float fixed_to_float(uint32_t x) { return (x >> 8) * (1.0f / 16777216.0f)
 // The scrambles work on bit-reversed values, and dimension 0 is the reversed
 // index itself: reverse_bits(laine_karras_permutation(shuffled, seed)) is
 // nested_uniform_scramble(sobol_dimension0(shuffled), seed) with two
-// reversals less (and likewise for dimension 1, generated reversed).
+// reversals less (and likewise for dimension 1).
 inline vec2f sample_sobol2f(uint32_t index, uint64_t seed) {
   auto hash     = hash_uint64(seed);
   auto more     = hash_uint64(hash);
   auto shuffled = nested_uniform_scramble(index, (uint32_t)hash);
-  auto reversed = 0u;  // reverse_bits(sobol_dimension1(shuffled))
-  for (auto direction = 1u, i = shuffled; i != 0; i >>= 1, direction ^= direction << 1) {
-    if (i & 1) reversed ^= direction;
-  }
   auto x = reverse_bits(laine_karras_permutation(shuffled, (uint32_t)(hash >> 32)));
-  auto y = reverse_bits(laine_karras_permutation(reversed, (uint32_t)more));
+  auto y = reverse_bits(
+      laine_karras_permutation(sobol_dimension1_reversed(shuffled), (uint32_t)more));
   return {fixed_to_float(x), fixed_to_float(y)};
 }
 
@@ -173,12 +174,13 @@ struct sequence_state {
 // arguments, so that any range of samples renders alone.
 inline sequence_state make_sequence(sequence_type type, uint64_t seed, int64_t pixel,
     uint32_t sample, int sobol_pairs) {
+  auto seed_hash    = hash_uint64(seed);
   auto state        = sequence_state{};
   state.type        = type;
-  state.key         = hash_uint64(hash_uint64(seed) ^ (uint64_t)pixel);
+  state.key         = hash_uint64(seed_hash ^ (uint64_t)pixel);
   state.index       = sample;
   state.sobol_pairs = type == sequence_type::sobol ? sobol_pairs : 0;
-  auto key   = hash_uint64(seed) ^ hash_uint64(((uint64_t)pixel << 24) ^ (uint64_t)sample);
+  auto key   = seed_hash ^ hash_uint64(((uint64_t)pixel << 24) ^ (uint64_t)sample);
   state.rng  = make_rng(hash_uint64(key), (uint64_t)pixel);
   return state;
 }
