@@ -5,12 +5,15 @@
 #include "yocto_sceneio.h"
 
 #include <OpenImageIO/imageio.h>
+#include <sys/resource.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <atomic>
 #include <cctype>
 #include <cerrno>
 #include <charconv>
+#include <cmath>
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
@@ -59,6 +62,31 @@ std::string make_temporary_filename(const std::string& filename) {
   auto        extension = stem.size() == base.size() ? std::string{} : base.substr(dot);
   return directory + stem + ".tmp-" + std::to_string((long)getpid()) + "-" +
          std::to_string(counter++) + extension;
+}
+
+static double default_load_memory_limit() {
+  auto pages = sysconf(_SC_PHYS_PAGES), page_size = sysconf(_SC_PAGE_SIZE);
+  auto limit = pages > 0 && page_size > 0 ? (double)pages * (double)page_size
+                                          : 8.0 * (1 << 30);
+  auto address_space = rlimit{};
+  if (getrlimit(RLIMIT_AS, &address_space) == 0 &&
+      address_space.rlim_cur != RLIM_INFINITY)
+    limit = std::min(limit, (double)address_space.rlim_cur);
+  return 0.75 * limit;
+}
+
+double load_memory_limit = default_load_memory_limit();
+
+bool check_load_memory(const std::string& filename, const std::string& what,
+    double bytes, std::string& error) {
+  if (bytes <= load_memory_limit) return true;
+  auto mebibytes = [](double bytes) {
+    return std::to_string((long long)std::ceil(bytes / (1 << 20)));
+  };
+  error = filename + ": " + what + " needs " + mebibytes(bytes) +
+          " MiB, over the memory limit of " + mebibytes(load_memory_limit) +
+          " MiB (--max-memory)";
+  return false;
 }
 
 // Reads a whole file in one go: PLY files with millions of curves are parsed

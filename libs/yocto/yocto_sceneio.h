@@ -118,6 +118,21 @@ std::string path_join(const std::string& directory, const std::string& filename)
 // A temporary filename next to `filename`, unique to this process.
 std::string make_temporary_filename(const std::string& filename);
 
+// The memory one load may ask for, in bytes. Sizes read from a file (image
+// pixels, element counts, inflated text, generated geometry) are checked
+// against it before anything is allocated, so a tiny file claiming a huge
+// size fails with a message naming the file instead of exhausting memory.
+// yscene sets it from --max-memory; the default is 3/4 of physical memory,
+// or of the address-space limit (ulimit -v) when that is lower.
+extern double load_memory_limit;
+
+// Checks that `what` in `filename` needing `bytes` fits load_memory_limit;
+// otherwise sets error to "FILENAME: WHAT needs N MiB, over the memory limit
+// of M MiB (--max-memory)" and returns false. Bytes are a double so that
+// products of untrusted counts cannot overflow.
+bool check_load_memory(const std::string& filename, const std::string& what,
+    double bytes, std::string& error);
+
 }  // namespace yocto
 
 #endif
