@@ -3,6 +3,7 @@
 //
 
 #include <sys/resource.h>
+#include <unistd.h>
 
 #include <CLI/CLI.hpp>
 #include <atomic>
@@ -29,17 +30,24 @@ static int print_error(const std::string& message) {
 
 // Creates the missing directories above an output file before the work that
 // fills it, so that a long render or a conversion does not fail at its end.
+// The folders made are removed again if the command fails (see main).
 static bool make_output_directory(const std::string& output, std::string& error) {
-  auto directory = std::filesystem::path(output).parent_path();
-  auto ec        = std::error_code{};
-  if (directory.empty() || std::filesystem::is_directory(directory, ec)) return true;
-  std::filesystem::create_directories(directory, ec);
-  if (ec || !std::filesystem::is_directory(directory)) {
-    error = output + ": cannot create directory " + directory.string() +
-            (ec ? " (" + ec.message() + ")" : "");
-    return false;
-  }
-  return true;
+  if (make_output_directories(path_dirname(output), error)) return true;
+  error = output + ": " + error;
+  return false;
+}
+
+// SIGTERM, SIGHUP, SIGQUIT and (outside a render) SIGINT end a command with
+// nothing of its outputs left: temporaries and the folders it made go, then
+// the signal takes its default course.
+static void handle_fatal_signal(int signal) {
+  remove_pending_outputs();
+  std::signal(signal, SIG_DFL);
+  std::raise(signal);
+}
+
+static void install_signal_handlers() {
+  for (auto signal : {SIGINT, SIGTERM, SIGHUP, SIGQUIT}) std::signal(signal, handle_fatal_signal);
 }
 
 static double seconds_since(std::chrono::steady_clock::time_point start) {
@@ -105,12 +113,8 @@ static bool load_any_scene(const std::string& filename, scene_data& scene,
 // The first Ctrl-C asks the render to stop after its pass; a second one,
 // while that pass or loading still runs, ends the program as usual.
 static std::atomic<bool> interrupted = false;
-static void handle_sigint(int) {
-  if (interrupted) {
-    std::signal(SIGINT, SIG_DFL);
-    std::raise(SIGINT);
-    return;
-  }
+static void handle_sigint(int signal) {
+  if (interrupted) return handle_fatal_signal(signal);
   interrupted = true;
 }
 
@@ -189,6 +193,44 @@ static int run_raycast(const render_options& options, const scene_data& scene,
   return 0;
 }
 
+// Checks before any work that the output can be written: its folder takes a
+// new file, the name is not a folder, the disk holds the image (12 bytes a
+// pixel, the float formats' size, bounds every format) and JPEG's largest
+// side is not exceeded.
+static bool check_render_output(
+    const render_options& options, const trace_params& params, std::string& error) {
+  auto side = (double)std::max(params.resolution, 1);
+  if ((path_extension(options.output) == ".jpg" || path_extension(options.output) == ".jpeg") &&
+      side > 65500) {
+    error = options.output + ": JPEG images are at most 65500 pixels a side (resolution " +
+            std::to_string(params.resolution) + ")";
+    return false;
+  }
+  return check_output_file(options.output, side * side * 12 + 65536, error);
+}
+
+// After a failed save, writes the image as STEM-rescued.exr next to the
+// output, else in the current folder, else in the temporary one (numbered
+// if taken: an existing file is never overwritten).
+static bool save_rescued_image(
+    const std::string& output, const texture_data& image, std::string& rescued) {
+  auto name    = std::filesystem::path(output).stem().string() + "-rescued";
+  auto folders = std::vector<std::string>{
+      path_dirname(output), "", std::filesystem::temp_directory_path().string()};
+  for (auto& folder : folders) {
+    for (auto attempt = 0; attempt < 100; attempt++) {
+      rescued = path_join(
+          folder, name + (attempt == 0 ? "" : "-" + std::to_string(attempt)) + ".exr");
+      auto ec = std::error_code{};
+      if (std::filesystem::exists(rescued, ec)) continue;
+      auto error = std::string{};
+      if (save_image(rescued, image, error, 0, false)) return true;
+      break;  // this folder does not take it: the next one
+    }
+  }
+  return false;
+}
+
 static int run_render(const render_options& options, trace_params params,
     const CLI::App& command) {
   if (!is_image_filename(options.output))
@@ -221,6 +263,7 @@ static int run_render(const render_options& options, trace_params params,
     params.camera = (int)(found - scene.camera_names.begin());
   }
   if (!check_trace_params(scene, params, error)) return print_error(error);
+  if (!check_render_output(options, params, error)) return print_error(error);
   auto load_time = seconds_since(start);
 
   auto bvh        = scene_bvh{};
@@ -287,7 +330,14 @@ static int run_render(const render_options& options, trace_params params,
         (long long)state.nonfinite.load());
 
   auto image = get_image(state);
-  if (!save_image(options.output, image, error, options.exposure)) return print_error(error);
+  if (!save_image(options.output, image, error, options.exposure)) {
+    // The output was checked before the render, yet the write failed (the
+    // disk filled up, say): the samples are worth keeping.
+    auto rescued = std::string{};
+    if (save_rescued_image(options.output, image, rescued))
+      return print_error(error + "; the render was saved to " + rescued);
+    return print_error(error + "; the render could not be saved elsewhere either");
+  }
   auto samples = (double)state.width * state.height * state.samples;
   std::printf("rendered %s: %dx%d, %d spp in %.2fs (%s samples/s, %s rays/s, peak memory %s bytes)\n",
       options.output.c_str(), state.width, state.height, state.samples, render_time,
@@ -420,12 +470,17 @@ static bool load_first_camera(const std::string& filename, camera_data& camera,
     if (!load_text(filename, text, error)) return false;
     auto world = find_world_begin(text);
     if (world == std::string::npos) return error = filename + ": no WorldBegin", false;
-    auto temporary = make_temporary_filename(
-        (std::filesystem::temp_directory_path() / "yscene-camera.pbrt").string());
-    if (!save_text(temporary, text.substr(0, world) + "WorldBegin\n", error)) return false;
+    // The copy goes to a private folder (mode 0700, unpredictable name) of
+    // the system's temporary folder: no other user can plant a link there.
+    auto folder = (std::filesystem::temp_directory_path() / "yscene-XXXXXX").string();
+    if (!mkdtemp(folder.data()))
+      return error = folder + ": cannot create a temporary folder", false;
+    auto temporary = folder + "/camera.pbrt";
+    auto ok = save_text(temporary, text.substr(0, world) + "WorldBegin\n", error);
     auto warnings = std::vector<std::string>{};
-    auto ok       = load_pbrt_scene(temporary, scene, error, pbrt_params{}, &warnings);
+    if (ok) ok = load_pbrt_scene(temporary, scene, error, pbrt_params{}, &warnings);
     std::remove(temporary.c_str());
+    rmdir(folder.c_str());
     // Messages name the user's file, not the temporary copy; warnings (e.g.
     // an unsupported camera type) go to stderr, as convert's do.
     auto rename = [&](std::string message) {
@@ -661,13 +716,19 @@ static int run_main(int argc, const char** argv) {
   return 1;
 }
 
-// Whatever escapes (a huge scene's allocation) is one error line, not an abort.
+// Whatever escapes (a huge scene's allocation) is one error line, not an
+// abort. A command that fails leaves none of the folders it made.
 int main(int argc, const char** argv) {
+  install_signal_handlers();
+  auto code = 1;
   try {
-    return run_main(argc, argv);
+    code = run_main(argc, argv);
   } catch (const std::bad_alloc&) {
-    return print_error("out of memory");
+    code = print_error("out of memory");
   } catch (const std::exception& e) {
-    return print_error(e.what());
+    code = print_error(e.what());
   }
+  if (code == 0) keep_output_directories();
+  else remove_output_directories();
+  return code;
 }

@@ -4,6 +4,8 @@
 
 #include "yocto_hairgen.h"
 
+#include <sys/stat.h>
+#include <unistd.h>
 #include <zlib.h>
 
 #include <cmath>
@@ -311,11 +313,17 @@ namespace yocto {
 bool save_pbrt_curves(const std::string& filename, const shape_data& shape,
     std::string& error) {
   auto gzipped = filename.size() > 3 && filename.substr(filename.size() - 3) == ".gz";
-  // A name unique to this process and call, as sceneio's saves: concurrent
-  // writers of the same output never share (and clobber) a temporary.
-  auto temporary = make_temporary_filename(filename);
-  auto file = gzopen(temporary.c_str(), gzipped ? "wb6" : "wbT");
-  if (!file) return error = filename + ": cannot open for writing", false;
+  // Through sceneio's checked temporary; zlib writes into a duplicate of its
+  // descriptor, so that finishing can still flush and measure the file.
+  auto output = output_file{};
+  if (!open_output_file(output, filename, error)) return false;
+  auto descriptor = dup(output.descriptor);
+  auto file = descriptor >= 0 ? gzdopen(descriptor, gzipped ? "wb6" : "wbT") : nullptr;
+  if (!file) {
+    if (descriptor >= 0) close(descriptor);
+    discard_output_file(output);
+    return error = filename + ": cannot open for writing", false;
+  }
   auto ok   = true;
   auto line = std::string{};
   char buffer[512];
@@ -336,10 +344,14 @@ bool save_pbrt_curves(const std::string& filename, const shape_data& shape,
     write(buffer, size);
   }
   if (gzclose(file) != Z_OK) ok = false;
-  if (!ok || std::rename(temporary.c_str(), filename.c_str()) != 0) {
-    std::remove(temporary.c_str());
-    return error = filename + ": cannot write", false;
+  // The bytes went through zlib's descriptor: the size check counts them.
+  auto status = (struct stat){};
+  if (ok && fstat(output.descriptor, &status) == 0) output.written = (size_t)status.st_size;
+  if (!ok) {
+    discard_output_file(output);
+    return error = filename + ": cannot write file", false;
   }
+  if (!commit_output_file(output, error)) return false;
   return true;
 }
 

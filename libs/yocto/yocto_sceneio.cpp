@@ -4,8 +4,14 @@
 
 #include "yocto_sceneio.h"
 
+#include <OpenImageIO/filesystem.h>
 #include <OpenImageIO/imageio.h>
+#include <fcntl.h>
+#include <signal.h>
+#include <sys/random.h>
 #include <sys/resource.h>
+#include <sys/stat.h>
+#include <sys/statvfs.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -13,6 +19,7 @@
 #include <cctype>
 #include <cerrno>
 #include <charconv>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
@@ -50,18 +57,284 @@ std::string path_join(const std::string& directory, const std::string& filename)
   return directory + "/" + filename;
 }
 
-std::string make_temporary_filename(const std::string& filename) {
-  // The pid keeps processes apart, the counter keeps threads and repeated
-  // saves apart; the extension stays last because OpenImageIO picks the
-  // format from it.
-  static auto counter   = std::atomic<int>{0};
-  auto        directory = path_dirname(filename);
-  auto        base      = filename.substr(directory.size());
-  auto        dot       = base.find_last_of('.');
-  auto        stem = dot == std::string::npos || dot == 0 ? base : base.substr(0, dot);
-  auto        extension = stem.size() == base.size() ? std::string{} : base.substr(dot);
-  return directory + stem + ".tmp-" + std::to_string((long)getpid()) + "-" +
-         std::to_string(counter++) + extension;
+// Paths to remove when a command fails or is killed: temporaries being
+// written and folders made for outputs. Fixed slots of heap strings, so that
+// a signal handler can walk them without locks or allocation.
+struct pending_path {
+  std::atomic<char*> path      = nullptr;
+  std::atomic<bool>  directory = false;
+};
+static pending_path pending_paths[4096];
+
+static void add_pending_path(const std::string& path, bool directory) {
+  for (auto& slot : pending_paths) {
+    if (slot.path.load() != nullptr) continue;
+    auto copy     = strdup(path.c_str());
+    auto expected = (char*)nullptr;
+    slot.directory = directory;
+    if (slot.path.compare_exchange_strong(expected, copy)) return;
+    std::free(copy);
+  }
+  // All slots taken: the path is still cleaned up on the normal exit paths.
+}
+
+static void remove_pending_path(const std::string& path) {
+  for (auto& slot : pending_paths) {
+    auto current = slot.path.load();
+    if (current == nullptr || path != current) continue;
+    if (slot.path.compare_exchange_strong(current, nullptr)) std::free(current);
+    return;
+  }
+}
+
+void remove_pending_outputs() {
+  // Files first, then folders deepest first (they were listed top down).
+  for (auto& slot : pending_paths) {
+    auto path = slot.path.load();
+    if (path != nullptr && !slot.directory) unlink(path);
+  }
+  for (auto i = (int)std::size(pending_paths) - 1; i >= 0; i--) {
+    auto path = pending_paths[i].path.load();
+    if (path != nullptr && pending_paths[i].directory) rmdir(path);
+  }
+}
+
+// Unpredictable temporary names: another local user cannot guess one and
+// plant a link there, and O_EXCL refuses anything already there anyway.
+static std::string random_suffix() {
+  uint8_t bytes[8] = {};
+  if (getrandom(bytes, sizeof(bytes), 0) != (ssize_t)sizeof(bytes)) {
+    static auto counter = std::atomic<uint64_t>{0};
+    auto        value   = (uint64_t)getpid() * 0x9e3779b97f4a7c15ull ^
+                 (uint64_t)std::chrono::steady_clock::now().time_since_epoch().count() ^
+                 (counter++ << 48);
+    std::memcpy(bytes, &value, sizeof(bytes));
+  }
+  static const char digits[] = "abcdefghijklmnopqrstuvwxyz012345";
+  auto suffix = std::string{};
+  for (auto byte : bytes) suffix += digits[byte & 31];
+  return suffix;
+}
+
+// NAME.tmp-RANDOM.EXT next to filename: the extension stays last, since
+// image writers pick the format from it.
+static std::string temporary_name(const std::string& filename) {
+  auto directory = path_dirname(filename);
+  auto base      = filename.substr(directory.size());
+  auto dot       = base.find_last_of('.');
+  auto stem      = dot == std::string::npos || dot == 0 ? base : base.substr(0, dot);
+  auto extension = stem.size() == base.size() ? std::string{} : base.substr(dot);
+  return directory + stem + ".tmp-" + random_suffix() + extension;
+}
+
+bool open_output_file(output_file& file, const std::string& filename, std::string& error) {
+  file = {};
+  for (auto attempt = 0; attempt < 16; attempt++) {
+    auto temporary = temporary_name(filename);
+    // Listed before it exists, so no signal can leave it behind.
+    add_pending_path(temporary, false);
+    auto descriptor = open(temporary.c_str(),
+        O_WRONLY | O_CREAT | O_EXCL | O_NOFOLLOW | O_CLOEXEC, 0666);
+    if (descriptor >= 0) {
+      file = {filename, temporary, descriptor, 0};
+      return true;
+    }
+    auto code = errno;
+    remove_pending_path(temporary);
+    if (code != EEXIST) {
+      error = filename + ": cannot create file (" + std::strerror(code) + ")";
+      return false;
+    }
+  }
+  error = filename + ": cannot create a temporary file next to it";
+  return false;
+}
+
+bool write_output_file(output_file& file, const void* data, size_t size, std::string& error) {
+  auto bytes = (const char*)data;
+  while (size > 0) {
+    auto count = write(file.descriptor, bytes, std::min(size, (size_t)1 << 30));
+    if (count < 0 && errno == EINTR) continue;
+    if (count <= 0) {
+      error = file.filename + ": cannot write file (" +
+              (count < 0 ? std::strerror(errno) : "no progress") + ")";
+      return false;
+    }
+    bytes += count;
+    size -= (size_t)count;
+    file.written += (size_t)count;
+  }
+  return true;
+}
+
+bool finish_output_file(output_file& file, std::string& error) {
+  if (file.descriptor < 0) return true;
+  // Delayed allocation reports a full disk at fsync or close, not at write.
+  auto status = (struct stat){};
+  auto code   = 0;
+  if (fsync(file.descriptor) != 0) code = errno;
+  else if (fstat(file.descriptor, &status) != 0) code = errno;
+  if (close(file.descriptor) != 0 && code == 0) code = errno;
+  file.descriptor = -1;
+  if (code != 0) {
+    error = file.filename + ": cannot write file (" + std::strerror(code) + ")";
+    return false;
+  }
+  if ((size_t)status.st_size != file.written) {
+    error = file.filename + ": cannot write file (" + std::to_string(status.st_size) +
+            " of " + std::to_string(file.written) + " bytes on disk)";
+    return false;
+  }
+  return true;
+}
+
+void discard_output_file(output_file& file) {
+  if (file.descriptor >= 0) close(file.descriptor);
+  if (!file.temporary.empty()) {
+    unlink(file.temporary.c_str());
+    remove_pending_path(file.temporary);
+  }
+  file = {};
+}
+
+void discard_output_files(std::vector<output_file>& files) {
+  for (auto& file : files) discard_output_file(file);
+}
+
+// Blocks the signals that end a command while a commit renames its files.
+struct signal_blocker {
+  sigset_t previous = {};
+  signal_blocker() {
+    auto blocked = sigset_t{};
+    sigemptyset(&blocked);
+    for (auto signal : {SIGINT, SIGTERM, SIGHUP, SIGQUIT}) sigaddset(&blocked, signal);
+    pthread_sigmask(SIG_BLOCK, &blocked, &previous);
+  }
+  ~signal_blocker() { pthread_sigmask(SIG_SETMASK, &previous, nullptr); }
+};
+
+bool commit_output_files(std::vector<output_file>& files, std::string& error, bool replace) {
+  for (auto& file : files) {
+    if (!finish_output_file(file, error)) return discard_output_files(files), false;
+  }
+  auto blocker = signal_blocker{};
+  // Backups (hard links) of the files a multi-file commit replaces, so that
+  // a failed rename can put every one back; one file needs none, its rename
+  // is atomic.
+  auto backups = std::vector<std::string>(files.size());
+  auto created = std::vector<bool>(files.size(), false);
+  auto undo    = [&](size_t count, const std::string& message) {
+    for (size_t i = 0; i < count; i++) {
+      if (!backups[i].empty()) rename(backups[i].c_str(), files[i].filename.c_str());
+      else if (created[i]) unlink(files[i].filename.c_str());
+    }
+    for (auto& backup : backups)
+      if (!backup.empty()) unlink(backup.c_str());
+    discard_output_files(files);
+    error = message;
+    return false;
+  };
+  for (size_t i = 0; i < files.size(); i++) {
+    auto& file   = files[i];
+    auto  status = (struct stat){};
+    auto  exists = lstat(file.filename.c_str(), &status) == 0;
+    if (exists && S_ISDIR(status.st_mode))
+      return undo(i, file.filename + ": is a directory, not a file");
+    if (!replace) {
+      // link fails if the name exists: nothing is ever overwritten.
+      if (link(file.temporary.c_str(), file.filename.c_str()) != 0)
+        return undo(i, file.filename + ": cannot create file (" + std::strerror(errno) + ")");
+      created[i] = true;
+      unlink(file.temporary.c_str());
+      continue;
+    }
+    if (exists && files.size() > 1) {
+      auto backup = temporary_name(file.filename);
+      if (link(file.filename.c_str(), backup.c_str()) == 0) backups[i] = backup;
+    }
+    if (rename(file.temporary.c_str(), file.filename.c_str()) != 0)
+      return undo(i, file.filename + ": cannot rename temporary file (" +
+                         std::strerror(errno) + ")");
+    created[i] = !exists;
+  }
+  for (auto& backup : backups)
+    if (!backup.empty()) unlink(backup.c_str());
+  for (auto& file : files) remove_pending_path(file.temporary), file = {};
+  return true;
+}
+
+bool commit_output_file(output_file& file, std::string& error, bool replace) {
+  auto files = std::vector<output_file>{file};
+  auto ok    = commit_output_files(files, error, replace);
+  file       = {};
+  return ok;
+}
+
+bool check_output_file(const std::string& filename, double bytes, std::string& error) {
+  auto status = (struct stat){};
+  if (stat(filename.c_str(), &status) == 0 && S_ISDIR(status.st_mode)) {
+    error = filename + ": is a directory, not a file";
+    return false;
+  }
+  // A real file in the folder proves it takes one (permissions, read-only
+  // or full file systems, a missing folder).
+  auto file = output_file{};
+  if (!open_output_file(file, filename, error)) return false;
+  discard_output_file(file);
+  auto directory = path_dirname(filename);
+  auto space     = (struct statvfs){};
+  if (statvfs(directory.empty() ? "." : directory.c_str(), &space) == 0) {
+    auto available = (double)space.f_bavail * (double)space.f_frsize;
+    if (available < bytes) {
+      error = filename + ": not enough free space (" +
+              std::to_string((long long)std::ceil(bytes / (1 << 20))) + " MiB needed, " +
+              std::to_string((long long)(available / (1 << 20))) + " MiB free)";
+      return false;
+    }
+  }
+  return true;
+}
+
+static std::vector<std::string> created_directories;
+
+bool make_output_directories(const std::string& directory, std::string& error) {
+  if (directory.empty()) return true;
+  // Each missing component from the top down, listed as it is made.
+  auto path = std::filesystem::path(directory).lexically_normal();
+  auto current = std::filesystem::path{};
+  for (auto& part : path) {
+    current /= part;
+    if (part.empty() || part == "/" || part == "." || part == "..") continue;
+    auto name   = current.string();
+    auto status = (struct stat){};
+    if (stat(name.c_str(), &status) == 0) {
+      if (S_ISDIR(status.st_mode)) continue;
+      error = name + ": cannot create directory (a file is in the way)";
+      return false;
+    }
+    add_pending_path(name, true);
+    if (mkdir(name.c_str(), 0777) != 0 && errno != EEXIST) {
+      error = name + ": cannot create directory (" + std::strerror(errno) + ")";
+      remove_pending_path(name);
+      return false;
+    }
+    created_directories.push_back(name);
+  }
+  return true;
+}
+
+void keep_output_directories() {
+  for (auto& directory : created_directories) remove_pending_path(directory);
+  created_directories.clear();
+}
+
+void remove_output_directories() {
+  // Only empty ones: rmdir refuses the rest.
+  for (auto it = created_directories.rbegin(); it != created_directories.rend(); ++it) {
+    rmdir(it->c_str());
+    remove_pending_path(*it);
+  }
+  created_directories.clear();
 }
 
 static double default_load_memory_limit() {
@@ -127,29 +400,16 @@ static bool load_binary(const std::string& filename, std::string& data, std::str
   return true;
 }
 
-// Writes data to a temporary name next to filename, then renames it; the
-// temporary file never survives a failure.
-static bool save_binary(
-    const std::string& filename, const std::string& data, std::string& error) {
-  auto temporary = make_temporary_filename(filename);
-  auto file      = std::fopen(temporary.c_str(), "wb");
-  if (!file) {
-    error = filename + ": cannot create file (" + std::strerror(errno) + ")";
+// Writes data through a temporary next to filename, checked and renamed.
+static bool save_binary(const std::string& filename, const std::string& data,
+    std::string& error, bool replace = true) {
+  auto file = output_file{};
+  if (!open_output_file(file, filename, error)) return false;
+  if (!write_output_file(file, data.data(), data.size(), error)) {
+    discard_output_file(file);
     return false;
   }
-  auto written = std::fwrite(data.data(), 1, data.size(), file);
-  auto closed  = std::fclose(file) == 0;
-  if (written != data.size() || !closed) {
-    std::remove(temporary.c_str());
-    error = filename + ": cannot write file";
-    return false;
-  }
-  if (std::rename(temporary.c_str(), filename.c_str()) != 0) {
-    error = filename + ": cannot rename temporary file (" + std::strerror(errno) + ")";
-    std::remove(temporary.c_str());
-    return false;
-  }
-  return true;
+  return commit_output_file(file, error, replace);
 }
 
 bool load_text(const std::string& filename, std::string& text, std::string& error) {
@@ -679,8 +939,9 @@ static inline void append_raw(std::string& buffer, T value) {
   buffer.append(bytes, sizeof(T));
 }
 
-bool save_shape(const std::string& filename, const shape_data& shape,
-    std::string& error, bool ascii) {
+// Encodes a shape as PLY bytes in memory (filename names it in messages).
+static bool encode_shape(const std::string& filename, const shape_data& shape,
+    std::string& data, std::string& error, bool ascii) {
   auto num_vertices = shape.positions.size();
   auto check_size   = [&](size_t size, const char* what) {
     if (size == 0 || size == num_vertices) return true;
@@ -716,8 +977,7 @@ bool save_shape(const std::string& filename, const shape_data& shape,
     indices = &shape.curves[0].x;
   }
 
-  auto data = std::string{};
-  data += "ply\nformat ";
+  data = "ply\nformat ";
   data += ascii ? "ascii" : "binary_little_endian";
   data += " 1.0\ncomment Written by yocto-hair\n";
   data += "element vertex " + std::to_string(num_vertices) + "\n";
@@ -772,6 +1032,13 @@ bool save_shape(const std::string& filename, const shape_data& shape,
         append_raw(data, (int32_t)indices[e * element_size + k]);
     }
   }
+  return true;
+}
+
+bool save_shape(const std::string& filename, const shape_data& shape,
+    std::string& error, bool ascii) {
+  auto data = std::string{};
+  if (!encode_shape(filename, shape, data, error, ascii)) return false;
   return save_binary(filename, data, error);
 }
 
@@ -799,10 +1066,9 @@ static bool is_8bit_extension(const std::string& extension) {
 
 // OpenImageIO 2.4 reads PFM but cannot write it: the format is a short
 // header and raw little-endian floats, rows from the bottom up.
-static bool save_pfm(
-    const std::string& filename, const texture_data& image, std::string& error) {
-  auto data = "PF\n" + std::to_string(image.width) + " " + std::to_string(image.height) +
-              "\n-1.0\n";  // a negative scale means little-endian
+static void encode_pfm(const texture_data& image, std::string& data) {
+  data = "PF\n" + std::to_string(image.width) + " " + std::to_string(image.height) +
+         "\n-1.0\n";  // a negative scale means little-endian
   data.reserve(data.size() + image.pixels.size() * 12);
   for (auto j = image.height - 1; j >= 0; j--) {
     for (auto i = 0; i < image.width; i++) {
@@ -810,7 +1076,6 @@ static bool save_pfm(
       for (auto c = 0; c < 3; c++) append_raw(data, pixel[c]);
     }
   }
-  return save_binary(filename, data, error);
 }
 
 bool is_image_filename(const std::string& filename) {
@@ -876,8 +1141,12 @@ bool load_image(const std::string& filename, texture_data& image, std::string& e
   return true;
 }
 
-bool save_image(const std::string& filename, const texture_data& image,
-    std::string& error, float exposure) {
+// Encodes an image in memory: the bytes then go to disk through
+// save_binary, which checks the write (OpenImageIO does not report a failed
+// write of some formats, and libjpeg ends the program on one).
+static bool encode_image(const std::string& filename, const texture_data& image,
+    std::string& data, std::string& error, float exposure) {
+
   auto extension = path_extension(filename);
   if (!is_image_filename(filename)) {
     error = filename + ": unknown image extension \"" + extension +
@@ -900,47 +1169,50 @@ bool save_image(const std::string& filename, const texture_data& image,
     }
   }
 
-  if (extension == ".pfm") return save_pfm(filename, image, error);
-  auto linear    = is_linear_extension(extension);
-  auto temporary = make_temporary_filename(filename);
-  auto output    = OIIO::ImageOutput::create(temporary);
+  if (extension == ".pfm") return encode_pfm(image, data), true;
+  auto linear = is_linear_extension(extension);
+  auto output = OIIO::ImageOutput::create(filename);
   if (!output) {
     error = filename + ": cannot save image (" + OIIO::geterror() + ")";
     return false;
   }
-  auto type = linear ? OIIO::TypeDesc::FLOAT : OIIO::TypeDesc::UINT8;
-  auto spec = OIIO::ImageSpec(image.width, image.height, 3, type);
+  auto bytes  = std::vector<unsigned char>{};
+  auto memory = OIIO::Filesystem::IOVecOutput(bytes);
+  auto proxy  = (OIIO::Filesystem::IOProxy*)&memory;
+  auto type   = linear ? OIIO::TypeDesc::FLOAT : OIIO::TypeDesc::UINT8;
+  auto spec   = OIIO::ImageSpec(image.width, image.height, 3, type);
   if (!linear) spec.attribute("oiio:ColorSpace", "sRGB");
+  spec.attribute("oiio:ioproxy", OIIO::TypeDesc::PTR, &proxy);
   auto failed = [&](const std::string& what) {
     error = filename + ": " + what + " (" + output->geterror() + ")";
-    output.reset();
-    std::remove(temporary.c_str());
     return false;
   };
-  if (!output->open(temporary, spec)) return failed("cannot create image");
+  if (!output->open(filename, spec)) return failed("cannot create image");
   auto written = false;
   if (linear) {
     written = output->write_image(OIIO::TypeDesc::FLOAT, image.pixels.data());
   } else {
-    auto scale = std::exp2(exposure);
-    auto bytes = std::vector<uint8_t>(image.pixels.size() * 3);
+    auto scale  = std::exp2(exposure);
+    auto pixels = std::vector<uint8_t>(image.pixels.size() * 3);
     for (size_t i = 0; i < image.pixels.size(); i++) {
       for (auto c = 0; c < 3; c++) {
         auto value = std::clamp(image.pixels[i][c] * scale, 0.0f, 1.0f);
-        bytes[i * 3 + c] = (uint8_t)std::lround(linear_to_srgb(value) * 255);
+        pixels[i * 3 + c] = (uint8_t)std::lround(linear_to_srgb(value) * 255);
       }
     }
-    written = output->write_image(OIIO::TypeDesc::UINT8, bytes.data());
+    written = output->write_image(OIIO::TypeDesc::UINT8, pixels.data());
   }
   if (!written) return failed("cannot write image");
   if (!output->close()) return failed("cannot finish image");
-  output.reset();
-  if (std::rename(temporary.c_str(), filename.c_str()) != 0) {
-    error = filename + ": cannot rename temporary file (" + std::strerror(errno) + ")";
-    std::remove(temporary.c_str());
-    return false;
-  }
+  data.assign(bytes.begin(), bytes.end());
   return true;
+}
+
+bool save_image(const std::string& filename, const texture_data& image,
+    std::string& error, float exposure, bool replace) {
+  auto data = std::string{};
+  if (!encode_image(filename, image, data, error, exposure)) return false;
+  return save_binary(filename, data, error, replace);
 }
 
 }  // namespace yocto
@@ -1819,54 +2091,46 @@ bool save_scene(const std::string& filename, const scene_data& scene,
   auto texture_files = make_file_names(
       scene.texture_names, scene.textures.size(), "texture", ".exr");
 
-  // On failure, remove what this call created, and only that.
-  auto created_files = std::vector<std::string>{};
-  auto created_dirs  = std::vector<std::string>{};
-  auto undo          = [&]() {
-    for (auto& file : created_files) std::remove(file.c_str());
-    for (auto it = created_dirs.rbegin(); it != created_dirs.rend(); ++it) {
-      auto ec = std::error_code{};
-      std::filesystem::remove(*it, ec);  // only if empty
-    }
+  // All or nothing: every file is written to its temporary first, and only
+  // when all are complete are they renamed into place, the json last. A
+  // failure (or a signal) before then leaves an existing scene untouched.
+  auto files = std::vector<output_file>{};
+  auto undo  = [&]() {
+    discard_output_files(files);
+    remove_output_directories();
     return false;
   };
-  auto make_directory = [&](const std::string& name) {
-    auto path = path_join(directory, name);
-    auto ec   = std::error_code{};
-    if (std::filesystem::is_directory(path, ec)) return true;
-    if (!std::filesystem::create_directory(path, ec)) {
-      error = path + ": cannot create directory (" + ec.message() + ")";
-      return false;
-    }
-    created_dirs.push_back(path);
-    return true;
+  auto stage = [&](const std::string& path, const std::string& data) {
+    files.emplace_back();
+    return open_output_file(files.back(), path, error) &&
+           write_output_file(files.back(), data.data(), data.size(), error) &&
+           finish_output_file(files.back(), error);
   };
-  auto save_file = [&](const std::string& path, auto&& save) {
-    auto ec     = std::error_code{};
-    auto exists = std::filesystem::exists(path, ec);
-    if (!save(path)) return false;
-    if (!exists) created_files.push_back(path);
-    return true;
-  };
-
-  if (!scene.shapes.empty() && !make_directory("shapes")) return undo();
+  auto data   = std::string{};
+  auto status = (struct stat){};
+  if (!directory.empty() && (stat(directory.c_str(), &status) != 0 || !S_ISDIR(status.st_mode))) {
+    error = filename + ": no such directory " + directory;
+    return false;
+  }
+  if (!scene.shapes.empty() && !make_output_directories(path_join(directory, "shapes"), error))
+    return undo();
   for (size_t i = 0; i < scene.shapes.size(); i++) {
     auto path = path_join(directory, "shapes/" + shape_files[i]);
-    if (!save_file(path, [&](const std::string& file) {
-          return save_shape(file, scene.shapes[i], error, ascii_shapes);
-        }))
+    if (!encode_shape(path, scene.shapes[i], data, error, ascii_shapes) || !stage(path, data))
       return undo();
   }
-  if (!scene.textures.empty() && !make_directory("textures")) return undo();
+  if (!scene.textures.empty() &&
+      !make_output_directories(path_join(directory, "textures"), error))
+    return undo();
   for (size_t i = 0; i < scene.textures.size(); i++) {
     auto path = path_join(directory, "textures/" + texture_files[i]);
-    if (!save_file(path, [&](const std::string& file) {
-          return save_image(file, scene.textures[i], error);
-        }))
+    if (!encode_image(path, scene.textures[i], data, error, 0) || !stage(path, data))
       return undo();
   }
-  auto text = make_scene_json(scene, shape_files, texture_files).dump(2) + "\n";
-  if (!save_text(filename, text, error)) return undo();
+  if (!stage(filename, make_scene_json(scene, shape_files, texture_files).dump(2) + "\n"))
+    return undo();
+  if (!commit_output_files(files, error)) return undo();
+  keep_output_directories();
   return true;
 }
 

@@ -90,9 +90,10 @@ bool load_image(const std::string& filename, texture_data& image, std::string& e
 
 // Saves linear RGB pixels: exr/hdr/pfm stay linear (exr and pfm as 32-bit
 // float), png/jpg are scaled by 2^exposure, clamped, converted to sRGB and
-// quantised. Unknown extension and non-finite pixels are errors.
+// quantised. Unknown extension and non-finite pixels are errors. With
+// replace false an existing file is an error, never overwritten.
 bool save_image(const std::string& filename, const texture_data& image,
-    std::string& error, float exposure = 0);
+    std::string& error, float exposure = 0, bool replace = true);
 
 // Is this an image extension we can save?
 bool is_image_filename(const std::string& filename);
@@ -104,7 +105,7 @@ bool is_image_filename(const std::string& filename);
 // -----------------------------------------------------------------------------
 namespace yocto {
 
-// Writes a file through a temporary name in the same directory, then renames.
+// Writes a file through a temporary in the same directory, then renames.
 // The text is written byte for byte, so binary data works too.
 bool save_text(const std::string& filename, const std::string& text, std::string& error);
 bool load_text(const std::string& filename, std::string& text, std::string& error);
@@ -115,8 +116,49 @@ std::string path_dirname(const std::string& filename);
 std::string path_extension(const std::string& filename);
 std::string path_join(const std::string& directory, const std::string& filename);
 
-// A temporary filename next to `filename`, unique to this process.
-std::string make_temporary_filename(const std::string& filename);
+// An output being written: a temporary next to its final name, created
+// exclusively under an unpredictable name (never an existing file or a
+// link planted there), filled, checked and renamed into place. Until then
+// it is listed for remove_pending_outputs, so no exit path leaves it.
+struct output_file {
+  std::string filename  = "";  // the final name
+  std::string temporary = "";  // where the bytes go until the rename
+  int         descriptor = -1;
+  size_t      written    = 0;
+};
+
+// Creates the temporary of `filename` (same folder and extension).
+bool open_output_file(output_file& file, const std::string& filename, std::string& error);
+// Writes all of `data` (short writes are continued, failures reported).
+bool write_output_file(output_file& file, const void* data, size_t size, std::string& error);
+// Flushes to disk and checks the size on disk against the bytes written:
+// a full disk or a file-size limit fails here, not after the rename.
+bool finish_output_file(output_file& file, std::string& error);
+// Finishes the files and renames them into place as one step: signals wait
+// until all are renamed, and if a rename fails the files already replaced
+// are restored from backups. With replace false, an existing file is never
+// overwritten (the commit fails instead). On failure nothing is left.
+bool commit_output_files(std::vector<output_file>& files, std::string& error,
+    bool replace = true);
+bool commit_output_file(output_file& file, std::string& error, bool replace = true);
+// Removes the temporaries of unfinished or failed outputs.
+void discard_output_files(std::vector<output_file>& files);
+void discard_output_file(output_file& file);
+
+// Checks up front that `filename` can be written: its folder exists and
+// takes a new file, the name is not a folder, and the disk has `bytes` free.
+bool check_output_file(const std::string& filename, double bytes, std::string& error);
+
+// A folder made for outputs: listed for remove_pending_outputs until
+// keep_output_directories, so a failed or interrupted command removes the
+// folders it created (only if empty; never one that existed).
+bool make_output_directories(const std::string& directory, std::string& error);
+void keep_output_directories();
+void remove_output_directories();
+
+// Removes every pending temporary and every folder listed above. Uses only
+// unlink and rmdir, so signal handlers may call it.
+void remove_pending_outputs();
 
 // The memory one load may ask for, in bytes. Sizes read from a file (image
 // pixels, element counts, inflated text, generated geometry) are checked
