@@ -14,7 +14,6 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
-#include <functional>
 
 #include "run_yscene.h"
 
@@ -60,17 +59,31 @@ static bool contains(const std::string& text, const std::string& part) {
   return text.find(part) != std::string::npos;
 }
 
-// Runs `work` in a child process under a file-size limit (writes past it
-// fail with EFBIG, as on a full disk; SIGXFSZ is ignored so that they do
-// fail rather than kill). Returns the child's exit status.
-static int run_with_file_limit(size_t bytes, const std::function<bool()>& work) {
+// Runs this test binary again as a child under a file-size limit (writes
+// past it fail with EFBIG, as on a full disk; SIGXFSZ is ignored so that
+// they fail rather than kill) to save `what` to `filename` (see
+// save_in_child below). A fresh process, not a bare fork: no lock held by
+// another thread of this one (OpenImageIO's pool) is inherited. Returns the
+// exit status (0 saved, 1 failed) and sets `message` to what it printed.
+static int run_save_in_child(
+    size_t limit, const std::string& what, const std::string& filename, std::string& message) {
+  int pipes[2];
+  if (pipe(pipes) != 0) return -1;
   auto child = fork();
   if (child == 0) {
-    std::signal(SIGXFSZ, SIG_IGN);
-    auto limit = rlimit{bytes, bytes};
-    setrlimit(RLIMIT_FSIZE, &limit);
-    _exit(work() ? 0 : 1);
+    dup2(pipes[1], 2);
+    close(pipes[0]);
+    setenv("YOCTO_SAVE_IN_CHILD", (what + ":" + std::to_string(limit) + ":" + filename).c_str(), 1);
+    execl("/proc/self/exe", "test_output", (char*)nullptr);
+    _exit(127);
   }
+  close(pipes[1]);
+  char buffer[4096];
+  message.clear();
+  for (auto count = read(pipes[0], buffer, sizeof(buffer)); count > 0;
+       count       = read(pipes[0], buffer, sizeof(buffer)))
+    message.append(buffer, (size_t)count);
+  close(pipes[0]);
   auto status = 0;
   waitpid(child, &status, 0);
   return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
@@ -142,6 +155,40 @@ static scene_data make_small_scene(int shapes = 1) {
   return scene;
 }
 
+// The child side of run_save_in_child: before the tests start, a process
+// started with YOCTO_SAVE_IN_CHILD=WHAT:LIMIT:FILENAME saves a noisy 96x96
+// image (27 KB as 8-bit, 110 KB as float; WHAT is its extension), a PLY
+// sphere, 100 KB of text or a scene of three spheres with a big last one,
+// then exits 0 if the save worked, 1 with its message if not.
+static bool save_in_child = []() {
+  auto variable = getenv("YOCTO_SAVE_IN_CHILD");
+  if (!variable) return false;
+  auto task     = std::string(variable);
+  auto first    = task.find(':'), second = task.find(':', first + 1);
+  auto what     = task.substr(0, first);
+  auto limit    = (rlim_t)std::stoull(task.substr(first + 1, second - first - 1));
+  auto filename = task.substr(second + 1);
+  std::signal(SIGXFSZ, SIG_IGN);
+  auto bound = rlimit{limit, limit};
+  setrlimit(RLIMIT_FSIZE, &bound);
+  auto error = std::string{};
+  auto ok    = false;
+  if (what == ".ply") {
+    ok = save_shape(filename, make_sphere_shape(64, 1), error);
+  } else if (what == ".txt") {
+    ok = save_text(filename, std::string(100000, 'x'), error);
+  } else if (what == "scene") {
+    auto scene = make_small_scene(3);
+    for (auto& shape : scene.shapes) shape = make_sphere_shape(32, 2);
+    scene.shapes[2] = make_sphere_shape(256, 2);
+    ok = save_scene(filename, scene, error);
+  } else {
+    ok = save_image(filename, make_noise_image(96, 96), error);
+  }
+  std::fprintf(stderr, "%s\n", error.c_str());
+  std::exit(ok ? 0 : 1);
+}();
+
 TEST(output, planted_links_are_never_followed) {
   auto dir    = test_directory("links");
   auto victim = dir.file("victim.txt");
@@ -187,23 +234,13 @@ TEST(output, a_full_disk_fails_the_save_and_keeps_the_previous_file) {
   // larger than the limit fails with the file named, the previous file at
   // that name stays as it was, and no temporary is left.
   auto dir   = test_directory("full");
-  auto image = make_noise_image(96, 96);  // 27 KB as 8-bit, 110 KB as float
-  auto shape = make_sphere_shape(64, 1);
   for (auto name : {"a.png", "a.jpg", "a.exr", "a.hdr", "a.pfm", "a.ply", "a.txt"}) {
     auto filename = dir.file(name);
     write_file(filename, "previous");
-    auto status = run_with_file_limit(4096, [&]() {
-      auto error = std::string{};
-      auto ok    = false;
-      if (fs::path(name).extension() == ".ply") ok = save_shape(filename, shape, error);
-      else if (fs::path(name).extension() == ".txt")
-        ok = save_text(filename, std::string(100000, 'x'), error);
-      else ok = save_image(filename, image, error);
-      // The message must name the file; exit 2 if it does not.
-      if (!ok && !contains(error, filename)) return std::fprintf(stderr, "%s\n", error.c_str()), false;
-      return ok;
-    });
-    EXPECT_EQ(status, 1) << name;
+    auto message = std::string{};
+    EXPECT_EQ(run_save_in_child(4096, fs::path(name).extension().string(), filename, message), 1)
+        << name << ": " << message;
+    EXPECT_TRUE(contains(message, filename)) << message;
     EXPECT_EQ(read_file(filename), "previous") << name;
     EXPECT_EQ(list_files(dir.path).size(), 1u) << name;
     fs::remove(filename);
@@ -219,16 +256,11 @@ TEST(output, a_failed_save_scene_leaves_an_existing_scene_untouched) {
   auto bytes  = std::vector<std::string>{};
   for (auto& file : before)
     if (fs::is_regular_file(dir.path / file)) bytes.push_back(read_file((dir.path / file).string()));
-  // A re-save of different geometry that runs out of space part way: the
-  // first shapes would fit, the last does not.
-  auto bigger = make_small_scene(3);
-  for (auto& shape : bigger.shapes) shape = make_sphere_shape(32, 2);
-  bigger.shapes[2] = make_sphere_shape(256, 2);
-  auto status = run_with_file_limit(64 * 1024, [&]() {
-    auto error = std::string{};
-    return save_scene(dir.file("scene.json"), bigger, error);
-  });
-  EXPECT_EQ(status, 1);
+  // A re-save of different geometry that runs out of space part way (see
+  // save_in_child): the first shapes would fit, the last does not.
+  auto message = std::string{};
+  EXPECT_EQ(run_save_in_child(64 * 1024, "scene", dir.file("scene.json"), message), 1) << message;
+  EXPECT_TRUE(contains(message, "cannot write")) << message;
   EXPECT_EQ(list_files(dir.path), before);
   auto index = (size_t)0;
   for (auto& file : before)
