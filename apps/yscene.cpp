@@ -424,7 +424,9 @@ static bool load_first_camera(const std::string& filename, camera_data& camera,
         (std::filesystem::temp_directory_path() / "yscene-camera.pbrt").string());
     if (!save_text(temporary, text.substr(0, world) + "WorldBegin\n", error)) return false;
     auto warnings = std::vector<std::string>{};
-    auto ok       = load_pbrt_scene(temporary, scene, error, pbrt_params{}, &warnings);
+    auto params   = pbrt_params{};
+    params.allow_empty = true;  // the world is cut off: a camera alone
+    auto ok = load_pbrt_scene(temporary, scene, error, params, &warnings);
     std::remove(temporary.c_str());
     // Messages name the user's file, not the temporary copy; warnings (e.g.
     // an unsupported camera type) go to stderr, as convert's do.
