@@ -951,7 +951,7 @@ TEST(pbrtio, gzip_inflation_is_bounded) {
 
 TEST(pbrtio, include_work_is_bounded) {
   // 11 files of 8 Includes each would be 8^10 parses: the text read with
-  // every Include stops at 8 times the budget, an Include counting 64 KiB.
+  // every Include stops at 4 times the budget, an Include counting 1 MiB.
   auto dir   = temp_dir{};
   auto limit = memory_limit_scope{1 * mebibyte};
   for (auto level = 0; level < 11; level++) {
@@ -961,8 +961,9 @@ TEST(pbrtio, include_work_is_bounded) {
     write_text(dir / ("level" + std::to_string(level) + ".pbrt"), text);
   }
   expect_error(dir, "WorldBegin\nShape \"sphere\"\nInclude \"level0.pbrt\"\n",
-      {"Include", ".pbrt: the scene's text with its Includes comes to over 8 MiB",
-          "8 times the memory limit", "64 KiB"});
+      {"level2.pbrt:1: Include", "level3.pbrt: the scene's text with its Includes comes to "
+                                  "over 4 MiB, 4 times the memory limit",
+          "1 MiB"});
 }
 
 TEST(pbrtio, generated_geometry_is_bounded) {
@@ -991,7 +992,7 @@ TEST(pbrtio, generated_geometry_is_bounded) {
   // Curves add up across directives.
   {
     auto small = memory_limit_scope{0.5 * mebibyte};
-    expect_error(dir, "WorldBegin\n" + strands_text(100, 100, "point3"),
+    expect_error(dir, "WorldBegin\n" + strands_text(70, 100, "point3"),
         {"scene.pbrt:", "Shape \"curve\": the scene needs", "memory limit of 1 MiB"});
   }
   // Curves as lines: the lines are checked before they are made.

@@ -61,7 +61,7 @@ static int open_regular_file(const std::string& filename, size_t& size, std::str
     error = filename + ": cannot open file (" + std::strerror(errno) + ")";
     return -1;
   }
-  struct stat info;
+  struct stat info = {};
   if (fstat(fd, &info) != 0 || !S_ISREG(info.st_mode)) {
     auto directory = S_ISDIR(info.st_mode);
     close(fd);
@@ -335,11 +335,13 @@ static bool lex_token(pbrt_lexer& lexer, pbrt_token& token, std::string& error) 
   }
   if (c == '"') {
     auto start = ++ptr;
+    auto bits  = (unsigned char)0;  // high bit set: not all ASCII
     while (ptr < end && *ptr != '"' && *ptr != '\n') {
       if (*ptr == '\\' && ptr + 1 < end && ptr[1] != '\n') {
         token.escaped = true;
         ptr++;
       }
+      bits |= (unsigned char)*ptr;
       ptr++;
     }
     if (ptr >= end || *ptr != '"') {
@@ -352,7 +354,7 @@ static bool lex_token(pbrt_lexer& lexer, pbrt_token& token, std::string& error) 
     token.text = {start, (size_t)(ptr - start)};
     ptr++;
     // Strings become names and json keys, which must be UTF-8.
-    auto invalid = find_invalid_utf8(token.text);
+    auto invalid = (bits & 0x80) ? find_invalid_utf8(token.text) : std::string_view::npos;
     if (invalid != std::string_view::npos) {
       char byte[8];
       std::snprintf(byte, sizeof(byte), "0x%02X", (unsigned)(unsigned char)token.text[invalid]);
@@ -674,7 +676,7 @@ static double texture_bytes(const texture_data& texture) {
 // it: the PLY and image readers would read a device forever or wait on a
 // fifo for a writer.
 static bool check_regular_file(pbrt_state& state, const std::string& path, const std::string& name) {
-  struct stat info;
+  struct stat info = {};
   if (stat(path.c_str(), &info) != 0) {
     set_error(state, "cannot find \"" + name + "\" (" + path + ")");
     return false;
@@ -1997,13 +1999,16 @@ static bool parse_directive(pbrt_state& state, std::string_view directive) {
   return true;
 }
 
-// Text turns into at most as much scene as the budget holds (a number takes
-// 4 bytes in memory and 2 or more in text; real curve files have about 3.5
-// bytes of text per byte of scene), so reading over 8 times the budget can
-// only come from Includes repeated over and over. An Include counts as at
-// least 64 KiB: opening a file costs about as much as parsing that much.
-const auto max_text_per_budget = 8.0;
-const auto min_include_bytes   = 64.0 * 1024;
+// The text read for one scene, with every Include, is bounded by 4 times the
+// memory budget. Real curve files hold about 3.5 bytes of text per byte of
+// scene, and a scene must leave room for its BVH, so a scene that renders
+// has less text than that; more can only come from Includes repeated over
+// and over (8 Includes in each of 11 files are 8^10 parses). An Include
+// counts as at least 1 MiB, so a tree of tiny files stops within seconds too:
+// resolving, opening and mapping a file takes some 25 us, as long as parsing
+// a few MiB of text.
+const auto max_text_per_budget = 4.0;
+const auto min_include_bytes   = 1024.0 * 1024;
 
 static bool parse_pbrt_file(pbrt_state& state, const std::string& filename, int depth) {
   // Errors of the file as a whole name the including directive too, if any.
@@ -2043,7 +2048,7 @@ static bool parse_pbrt_file(pbrt_state& state, const std::string& filename, int 
                 std::to_string((long long)(max_parsed / (1 << 20))) + " MiB, " +
                 std::to_string((int)max_text_per_budget) +
                 " times the memory limit (--max-memory; an Include counts as at least " +
-                std::to_string((int)(min_include_bytes / 1024)) + " KiB)");
+                std::to_string((int)(min_include_bytes / (1 << 20))) + " MiB)");
   auto text_bytes = (double)lexer.data.capacity();
   state.text_bytes += text_bytes;
   auto ec        = std::error_code{};

@@ -56,8 +56,8 @@ struct pbrt_params {
 // the scene so far, the text of open files, parameter lists and the
 // resampling of environment maps are checked before they grow past it; a
 // .gz file may inflate to at most 100 times its size (past 16 MiB); and the
-// text read with all Includes, each counted as at least 64 KiB, to at most
-// 8 times the limit.
+// text read with all Includes, each counted as at least 1 MiB, to at most
+// 4 times the limit.
 bool load_pbrt_scene(const std::string& filename, scene_data& scene,
     std::string& error, const pbrt_params& params = {},
     std::vector<std::string>* warnings = nullptr);
