@@ -478,7 +478,9 @@ static bool load_first_camera(const std::string& filename, camera_data& camera,
     auto temporary = folder + "/camera.pbrt";
     auto ok = save_text(temporary, text.substr(0, world) + "WorldBegin\n", error);
     auto warnings = std::vector<std::string>{};
-    if (ok) ok = load_pbrt_scene(temporary, scene, error, pbrt_params{}, &warnings);
+    auto params        = pbrt_params{};
+    params.allow_empty = true;  // the world is cut off: a camera alone
+    if (ok) ok = load_pbrt_scene(temporary, scene, error, params, &warnings);
     std::remove(temporary.c_str());
     rmdir(folder.c_str());
     // Messages name the user's file, not the temporary copy; warnings (e.g.

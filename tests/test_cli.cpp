@@ -302,6 +302,27 @@ TEST(cli, convert_bad_input_leaves_nothing) {
   EXPECT_FALSE(fs::exists(dir / "out"));
 }
 
+TEST(cli, convert_refuses_hostile_pbrt_and_writes_nothing) {
+  auto dir = make_test_dir("hostile-pbrt");
+  // A non-UTF-8 material name on a mesh (which once failed in the json
+  // writer after the PLY was saved), an empty file, and an Include of a
+  // device.
+  write_file(dir / "latin1.pbrt",
+      "WorldBegin\nMakeNamedMaterial \"caf\xe9\" \"string type\" \"diffuse\"\n"
+      "NamedMaterial \"caf\xe9\"\n"
+      "Shape \"trianglemesh\" \"point3 P\" [0 0 0 1 0 0 0 1 0] \"integer indices\" [0 1 2]\n");
+  write_file(dir / "empty.pbrt", "");
+  write_file(dir / "device.pbrt", "WorldBegin\nShape \"sphere\"\nInclude \"/dev/zero\"\n");
+  auto out = (dir / "out" / "scene.json").string();
+  expect_failure(run_yscene("convert " + (dir / "latin1.pbrt").string() + " " + out),
+      "latin1.pbrt:2: string \"caf\\xE9\" is not valid UTF-8");
+  expect_failure(run_yscene("convert " + (dir / "empty.pbrt").string() + " " + out),
+      "empty.pbrt: nothing to render");
+  expect_failure(run_yscene("convert " + (dir / "device.pbrt").string() + " " + out),
+      "device.pbrt:3: Include: \"/dev/zero\" (/dev/zero) is not a regular file");
+  EXPECT_FALSE(fs::exists(dir / "out"));
+}
+
 TEST(cli, convert_generated_hair_round_trips) {
   auto dir = make_test_dir("roundtrip");
   for (auto extension : {".pbrt", ".pbrt.gz", ".hair"}) {

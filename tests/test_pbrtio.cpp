@@ -5,6 +5,7 @@
 //
 
 #include <gtest/gtest.h>
+#include <sys/stat.h>
 #include <unistd.h>
 #include <yocto/yocto_pbrtio.h>
 #include <yocto/yocto_sceneio.h>
@@ -323,7 +324,7 @@ TEST(pbrtio, lookat_camera_matches_pbrt_image_orientation) {
       "LookAt 0 0 0  0 10 0  0 0 1\n"
       "Camera \"perspective\" \"float fov\" 40\n"
       "Film \"rgb\" \"integer xresolution\" 400 \"integer yresolution\" 200\n"
-      "WorldBegin\n"};
+      "WorldBegin\nTranslate 0 10 0\nShape \"sphere\"\n"};
   ASSERT_TRUE(load_text(dir, text, scene, error)) << error;
   ASSERT_EQ(scene.cameras.size(), 1u);
   auto& camera = scene.cameras[0];
@@ -912,6 +913,195 @@ TEST(pbrtio, include_errors) {
   stream.write("\xff\xff\xff\xff\xff\xff\xff\xff", 8);
   stream.close();
   expect_error(dir, "Include \"corrupt.pbrt.gz\"\n", {"corrupt.pbrt.gz"});
+}
+
+// -----------------------------------------------------------------------------
+// BOUNDS AND HOSTILE INPUT
+// -----------------------------------------------------------------------------
+
+// Lowers load_memory_limit for one test and restores it at the end, so
+// bounds are tested with small files.
+struct memory_limit_scope {
+  double saved = load_memory_limit;
+  explicit memory_limit_scope(double limit) { load_memory_limit = limit; }
+  ~memory_limit_scope() { load_memory_limit = saved; }
+};
+
+const auto mebibyte = 1024.0 * 1024.0;
+
+TEST(pbrtio, gzip_inflation_is_bounded) {
+  auto dir = temp_dir{};
+  // 17 MiB of blanks deflate to a few KB: past 16 MiB, more than 100 times
+  // the compressed size is refused as a bomb, whatever the budget.
+  write_gz(dir / "bomb.pbrt.gz", std::string(17 << 20, ' '));
+  expect_error(dir, "WorldBegin\nInclude \"bomb.pbrt.gz\"\nShape \"sphere\"\n",
+      {"scene.pbrt:2:", "Include", "bomb.pbrt.gz", "more than 100 times its compressed size"});
+  // Below 16 MiB, the budget bounds the inflated text.
+  auto limit = memory_limit_scope{2 * mebibyte};
+  write_gz(dir / "big.pbrt.gz", std::string(6 << 20, ' '));
+  expect_error(dir, "WorldBegin\nInclude \"big.pbrt.gz\"\nShape \"sphere\"\n",
+      {"scene.pbrt:2:", "big.pbrt.gz", "inflating the text needs", "memory limit of 2 MiB"});
+  // A gzip'd top-level file too.
+  write_gz(dir / "top.pbrt.gz", "WorldBegin\nShape \"sphere\"\n" + std::string(6 << 20, ' '));
+  auto scene = scene_data{};
+  auto error = std::string{};
+  EXPECT_FALSE(load_pbrt_scene(dir / "top.pbrt.gz", scene, error));
+  EXPECT_TRUE(contains(error, "top.pbrt.gz: inflating the text needs")) << error;
+}
+
+TEST(pbrtio, include_work_is_bounded) {
+  // 11 files of 8 Includes each would be 8^10 parses: the text read with
+  // every Include stops at 4 times the budget, an Include counting 1 MiB.
+  auto dir   = temp_dir{};
+  auto limit = memory_limit_scope{1 * mebibyte};
+  for (auto level = 0; level < 11; level++) {
+    auto text = std::string{};
+    for (auto k = 0; k < 8; k++)
+      text += level < 10 ? "Include \"level" + std::to_string(level + 1) + ".pbrt\"\n" : "# leaf\n";
+    write_text(dir / ("level" + std::to_string(level) + ".pbrt"), text);
+  }
+  expect_error(dir, "WorldBegin\nShape \"sphere\"\nInclude \"level0.pbrt\"\n",
+      {"level2.pbrt:1: Include", "level3.pbrt: the scene's text with its Includes comes to "
+                                  "over 4 MiB, 4 times the memory limit",
+          "1 MiB"});
+}
+
+TEST(pbrtio, generated_geometry_is_bounded) {
+  auto dir   = temp_dir{};
+  auto limit = memory_limit_scope{4 * mebibyte};
+  // 64 spheres of about 116 KB each through repeated Includes: the one that
+  // crosses 4 MiB is named with its file and line.
+  write_text(dir / "spheres.pbrt", [] {
+    auto text = std::string{};
+    for (auto k = 0; k < 8; k++) text += "Translate 1 0 0\nShape \"sphere\"\n";
+    return text;
+  }());
+  auto includes = std::string{"WorldBegin\n"};
+  for (auto k = 0; k < 8; k++) includes += "Include \"spheres.pbrt\"\n";
+  expect_error(dir, includes,
+      {"spheres.pbrt:", "Shape \"sphere\"", "the scene with this shape needs",
+          "memory limit of 4 MiB"});
+  // A parameter array claiming more than the budget fails as it grows.
+  auto points = std::string{};
+  for (auto k = 0; k < 1500000; k++) points += "0 ";
+  expect_error(dir,
+      "WorldBegin\nShape \"trianglemesh\" \"integer indices\" [0 1 2]\n\"point3 P\" [ " + points +
+          "]\n",
+      {"scene.pbrt:3:", "Shape \"trianglemesh\"", "the scene with parameter \"point3 P\"",
+          "memory limit of 4 MiB"});
+  // Curves add up across directives.
+  {
+    auto small = memory_limit_scope{0.5 * mebibyte};
+    expect_error(dir, "WorldBegin\n" + strands_text(70, 100, "point3"),
+        {"scene.pbrt:", "Shape \"curve\": the scene needs", "memory limit of 1 MiB"});
+  }
+  // Curves as lines: the lines are checked before they are made.
+  auto params     = pbrt_params{};
+  params.curves_as_lines = true;
+  params.segments = 100000;
+  expect_error(dir, "WorldBegin\n" + strands_text(10, 10, "point3"),
+      {"scene.pbrt: the scene with curves as lines (100000 segments each) needs",
+          "memory limit of 4 MiB"},
+      params);
+  // Under the budget, all of these load.
+  auto scene = scene_data{};
+  auto error = std::string{};
+  params.segments = 8;
+  EXPECT_TRUE(load_text(dir, "WorldBegin\nInclude \"spheres.pbrt\"\n" +
+                                 strands_text(10, 10, "point3"),
+      scene, error, nullptr, params))
+      << error;
+}
+
+TEST(pbrtio, equal_area_resampling_is_bounded) {
+  // A 512x512 equal-area map (3 MiB) resamples to 1024x512 (6 MiB): with an
+  // 8 MiB budget the map loads but its resampling is refused before it is
+  // allocated; with 16 MiB both fit.
+  auto dir   = temp_dir{};
+  auto image = texture_data{512, 512, std::vector<vec3f>(512 * 512, {0.5f, 0.5f, 0.5f})};
+  auto error = std::string{};
+  ASSERT_TRUE(save_image(dir / "sky.exr", image, error)) << error;
+  auto text = std::string{
+      "WorldBegin\nLightSource \"infinite\" \"string filename\" \"sky.exr\"\n"};
+  {
+    auto limit = memory_limit_scope{8 * mebibyte};
+    expect_error(dir, text,
+        {"scene.pbrt:2:", "LightSource \"infinite\"",
+            "the scene with the equal-area map \"sky.exr\" resampled to equirectangular needs",
+            "memory limit of 8 MiB"});
+  }
+  auto limit = memory_limit_scope{16 * mebibyte};
+  auto scene = scene_data{};
+  ASSERT_TRUE(load_text(dir, text, scene, error)) << error;
+  EXPECT_EQ(scene.textures.at(0).width, 1024);
+}
+
+TEST(pbrtio, strings_must_be_utf8) {
+  auto dir = temp_dir{};
+  // Latin-1, a lone continuation byte, an overlong '/', a surrogate, a code
+  // point past U+10FFFF and a sequence cut short by the closing quote.
+  for (auto bad : {"caf\xe9", "\x80", "\xc0\xaf", "\xed\xa0\x80", "\xf4\x90\x80\x80", "x\xe2\x82"}) {
+    expect_error(dir,
+        "WorldBegin\nMakeNamedMaterial \"" + std::string{bad} +
+            "\" \"string type\" \"diffuse\"\nShape \"sphere\"\n",
+        {"scene.pbrt:2: string \"", "\" is not valid UTF-8 (byte 0x"});
+  }
+  expect_error(dir, "WorldBegin\nShape \"sphere\" \"string note\" \"\xff\"\n",
+      {"scene.pbrt:2:", "not valid UTF-8 (byte 0xFF at offset 0"});
+  // Valid UTF-8 names of 2, 3 and 4 bytes are kept and save as json.
+  auto name  = std::string{"caf\xc3\xa9 \xe6\x97\xa5 \xf0\x9f\x98\x80"};
+  auto scene = scene_data{};
+  auto error = std::string{};
+  ASSERT_TRUE(load_text(dir,
+      "WorldBegin\nMakeNamedMaterial \"" + name + "\" \"string type\" \"diffuse\"\n"
+      "NamedMaterial \"" + name + "\"\nShape \"sphere\"\n",
+      scene, error))
+      << error;
+  EXPECT_EQ(scene.material_names.at(0), name);
+  EXPECT_TRUE(save_scene(dir / "saved.json", scene, error)) << error;
+}
+
+TEST(pbrtio, scene_with_nothing_to_render_is_an_error) {
+  auto dir = temp_dir{};
+  for (auto text : {"", "# nothing\n", "LookAt 0 0 5 0 0 0 0 1 0\nCamera \"perspective\"\nWorldBegin\n",
+           "WorldBegin\nLightSource \"distant\"\n"})
+    expect_error(dir, text, {"scene.pbrt: nothing to render: no shapes and no environment light"});
+  // A sky alone is something to see; a camera alone is fine when asked for.
+  auto scene = scene_data{};
+  auto error = std::string{};
+  EXPECT_TRUE(load_text(dir, "WorldBegin\nLightSource \"infinite\"\n", scene, error)) << error;
+  auto params        = pbrt_params{};
+  params.allow_empty = true;
+  EXPECT_TRUE(load_text(dir, "Camera \"perspective\"\nWorldBegin\n", scene, error, nullptr, params))
+      << error;
+  EXPECT_EQ(scene.cameras.size(), 1u);
+}
+
+TEST(pbrtio, only_regular_files_are_read) {
+  auto dir = temp_dir{};
+  fs::create_directories(dir / "folder.pbrt");
+  fs::create_symlink("/dev/zero", dir / "zero.pbrt");
+  ASSERT_EQ(mkfifo((dir / "fifo.pbrt").c_str(), 0600), 0);
+  for (auto name : {"/dev/zero", "zero.pbrt", "fifo.pbrt"}) {
+    expect_error(dir, "WorldBegin\nShape \"sphere\"\nInclude \"" + std::string{name} + "\"\n",
+        {"scene.pbrt:3:", "Include", name, "not a regular file"});
+    expect_error(dir,
+        "WorldBegin\nShape \"plymesh\" \"string filename\" \"" + std::string{name} + "\"\n",
+        {"scene.pbrt:2:", "Shape \"plymesh\"", name, "not a regular file"});
+    expect_error(dir,
+        "WorldBegin\nShape \"sphere\"\nLightSource \"infinite\" \"string mapname\" \"" +
+            std::string{name} + "\"\n",
+        {"scene.pbrt:3:", "LightSource \"infinite\"", name, "not a regular file"});
+  }
+  expect_error(dir, "WorldBegin\nShape \"sphere\"\nInclude \"folder.pbrt\"\n",
+      {"scene.pbrt:3:", "folder.pbrt", "is a directory"});
+  // The scene file itself.
+  for (auto name : {"folder.pbrt", "zero.pbrt", "fifo.pbrt"}) {
+    auto scene = scene_data{};
+    auto error = std::string{};
+    EXPECT_FALSE(load_pbrt_scene(dir / name, scene, error));
+    EXPECT_TRUE(contains(error, name)) << error;
+  }
 }
 
 // -----------------------------------------------------------------------------

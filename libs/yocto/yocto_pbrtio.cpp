@@ -14,6 +14,7 @@
 
 #include <array>
 #include <charconv>
+#include <cerrno>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -51,66 +52,123 @@ static bool validate_loaded_scene(
   return false;
 }
 
-// Reads a whole file into memory; .gz files are inflated. A gzip stream that
-// ends early or fails its checksum is an error, never a silently short file.
-static bool read_whole_file(
-    const std::string& filename, std::string& data, std::string& error) {
+// Opens a file for reading and gives its size; only regular files are
+// accepted: /dev/zero never ends, a directory has no text, and opening a fifo
+// would wait for a writer (hence O_NONBLOCK, which regular files ignore).
+static int open_regular_file(const std::string& filename, size_t& size, std::string& error) {
+  auto fd = open(filename.c_str(), O_RDONLY | O_NONBLOCK | O_CLOEXEC);
+  if (fd < 0) {
+    error = filename + ": cannot open file (" + std::strerror(errno) + ")";
+    return -1;
+  }
+  struct stat info = {};
+  if (fstat(fd, &info) != 0 || !S_ISREG(info.st_mode)) {
+    auto directory = S_ISDIR(info.st_mode);
+    close(fd);
+    error = filename + (directory ? ": is a directory, not a file"
+                                  : ": not a regular file (a device, fifo or socket)");
+    return -1;
+  }
+  size = (size_t)info.st_size;
+  return fd;
+}
+
+// pbrt text deflates 3 to 10 times; only crafted data comes near deflate's
+// limit of 1032 to 1. Past 16 MiB, a gzip'd file may inflate to at most 100
+// times its size, so a small bomb fails after little work.
+const auto max_inflation_ratio = 100.0;
+const auto min_inflation_bound = 16.0 * (1 << 20);
+
+// Reads an open regular file whole, closing it; .gz files are inflated. A
+// gzip stream that ends early or fails its checksum is an error, never a
+// silently short file. `held` bytes are already in use by the load: what is
+// read is checked against the memory budget with them, before allocating.
+static bool read_open_file(int fd, size_t size, const std::string& filename,
+    std::string& data, std::string& error, double held) {
   data.clear();
   if (ends_with(filename, ".gz")) {
-    auto file = gzopen(filename.c_str(), "rb");
+    auto file = gzdopen(fd, "rb");
     if (!file) {
+      close(fd);
       error = filename + ": cannot open file";
       return false;
     }
     gzbuffer(file, 1 << 20);
-    const auto chunk = (size_t)1 << 22;
+    auto       max_size = std::max(min_inflation_bound, max_inflation_ratio * size);
+    const auto chunk    = (size_t)1 << 22;
+    auto       fail     = [&](const std::string& message) {
+      gzclose_r(file);
+      error = filename + ": " + message;
+      data  = {};
+      return false;
+    };
     while (true) {
       auto old_size = data.size();
+      if ((double)old_size > max_size)
+        return fail("inflates past " +
+                    std::to_string((long long)(min_inflation_bound / (1 << 20))) +
+                    " MiB and to more than " + std::to_string((int)max_inflation_ratio) +
+                    " times its compressed size: not pbrt text (a decompression bomb?)");
+      // Grow by doubling, checking first: old and new buffers coexist.
+      if (old_size + chunk > data.capacity()) {
+        auto capacity = std::max(2 * data.capacity(), old_size + chunk);
+        auto message  = std::string{};
+        if (!check_load_memory(filename, "inflating the text",
+                held + (double)data.capacity() + (double)capacity, message)) {
+          gzclose_r(file);
+          error = message;
+          data  = {};
+          return false;
+        }
+        data.reserve(capacity);
+      }
       data.resize(old_size + chunk);
       auto count = gzread(file, data.data() + old_size, (unsigned)chunk);
       if (count < 0) {
-        auto errnum  = 0;
-        auto message = std::string{gzerror(file, &errnum)};
-        gzclose_r(file);
-        error = filename + ": corrupt or truncated gzip data after " +
-                std::to_string(old_size) + " uncompressed bytes (" + message + ")";
-        data.clear();
-        return false;
+        auto errnum = 0;
+        return fail("corrupt or truncated gzip data after " + std::to_string(old_size) +
+                    " uncompressed bytes (" + gzerror(file, &errnum) + ")");
       }
       data.resize(old_size + (size_t)count);
       if (count == 0) break;
     }
     // gzclose_r reports Z_BUF_ERROR when the last read ended inside a stream.
     if (gzclose_r(file) != Z_OK) {
-      error = filename + ": truncated gzip data after " +
-              std::to_string(data.size()) + " uncompressed bytes";
-      data.clear();
+      error = filename + ": truncated gzip data after " + std::to_string(data.size()) +
+              " uncompressed bytes";
+      data = {};
       return false;
     }
     return true;
   }
-  auto file = std::fopen(filename.c_str(), "rb");
-  if (!file) {
-    error = filename + ": cannot open file";
+  if (!check_load_memory(filename, "the text", held + (double)size, error)) {
+    close(fd);
     return false;
   }
-  std::fseek(file, 0, SEEK_END);
-  auto size = std::ftell(file);
-  std::fseek(file, 0, SEEK_SET);
-  if (size < 0) {
-    std::fclose(file);
-    error = filename + ": cannot read file";
-    return false;
+  data.resize(size);
+  auto read = (size_t)0;
+  while (read < size) {
+    auto count = ::read(fd, data.data() + read, size - read);
+    if (count < 0 && errno == EINTR) continue;
+    if (count <= 0) break;
+    read += (size_t)count;
   }
-  data.resize((size_t)size);
-  auto read = size > 0 ? std::fread(data.data(), 1, (size_t)size, file) : 0;
-  std::fclose(file);
-  if (read != (size_t)size) {
+  close(fd);
+  if (read != size) {
     error = filename + ": cannot read file";
-    data.clear();
+    data  = {};
     return false;
   }
   return true;
+}
+
+// Reads a whole regular file into memory; .gz files are inflated.
+static bool read_whole_file(
+    const std::string& filename, std::string& data, std::string& error, double held = 0) {
+  auto size = (size_t)0;
+  auto fd   = open_regular_file(filename, size, error);
+  if (fd < 0) return false;
+  return read_open_file(fd, size, filename, data, error, held);
 }
 
 // A read-only memory mapping of a plain file, unmapped when it goes out of
@@ -126,23 +184,16 @@ struct pbrt_file_mapping {
   }
 };
 
-// Maps a plain, non-empty file; false if it is gzip'd or cannot be mapped
-// (the caller then reads it, and reports errors).
-static bool map_file(const std::string& filename, pbrt_file_mapping& mapping) {
-  if (ends_with(filename, ".gz")) return false;
-  auto fd = open(filename.c_str(), O_RDONLY);
-  if (fd < 0) return false;
-  struct stat info;
-  if (fstat(fd, &info) != 0 || !S_ISREG(info.st_mode) || info.st_size <= 0) {
-    close(fd);
-    return false;
-  }
-  auto data = mmap(nullptr, (size_t)info.st_size, PROT_READ, MAP_PRIVATE, fd, 0);
-  close(fd);
+// Maps an open plain, non-empty file; false if it is gzip'd or cannot be
+// mapped (the caller then reads it). The file stays open.
+static bool map_file(
+    int fd, size_t size, const std::string& filename, pbrt_file_mapping& mapping) {
+  if (ends_with(filename, ".gz") || size == 0) return false;
+  auto data = mmap(nullptr, size, PROT_READ, MAP_PRIVATE, fd, 0);
   if (data == MAP_FAILED) return false;
-  madvise(data, (size_t)info.st_size, MADV_SEQUENTIAL);
+  madvise(data, size, MADV_SEQUENTIAL);
   mapping.data = data;
-  mapping.size = (size_t)info.st_size;
+  mapping.size = size;
   return true;
 }
 
@@ -216,6 +267,57 @@ static void skip_whitespace(pbrt_lexer& lexer) {
   }
 }
 
+// Offset of the first byte that does not start a valid UTF-8 sequence, or
+// npos. The second byte's range excludes overlong forms, surrogates and code
+// points past U+10FFFF (RFC 3629), as the json writer does.
+static size_t find_invalid_utf8(std::string_view text) {
+  auto i = (size_t)0;
+  while (i < text.size()) {
+    auto c = (unsigned char)text[i];
+    if (c < 0x80) {
+      i++;
+      continue;
+    }
+    auto length = 0;
+    auto low = (unsigned char)0x80, high = (unsigned char)0xbf;
+    if (c >= 0xc2 && c <= 0xdf) {
+      length = 2;
+    } else if (c >= 0xe0 && c <= 0xef) {
+      length = 3;
+      if (c == 0xe0) low = 0xa0;
+      if (c == 0xed) high = 0x9f;
+    } else if (c >= 0xf0 && c <= 0xf4) {
+      length = 4;
+      if (c == 0xf0) low = 0x90;
+      if (c == 0xf4) high = 0x8f;
+    } else {
+      return i;
+    }
+    if (i + length > text.size()) return i;
+    for (auto k = 1; k < length; k++) {
+      auto b = (unsigned char)text[i + k];
+      if (k == 1 ? (b < low || b > high) : (b < 0x80 || b > 0xbf)) return i;
+    }
+    i += length;
+  }
+  return std::string_view::npos;
+}
+
+// Text for a message: bytes outside printable ASCII as \xNN, at most 40.
+static std::string printable(std::string_view text) {
+  auto result = std::string{};
+  for (auto c : text.substr(0, 40)) {
+    if (c >= 0x20 && c < 0x7f) {
+      result += c;
+    } else {
+      char buffer[8];
+      std::snprintf(buffer, sizeof(buffer), "\\x%02X", (unsigned)(unsigned char)c);
+      result += buffer;
+    }
+  }
+  return text.size() > 40 ? result + "..." : result;
+}
+
 // Reads the next token; on a lexical error sets `error` (file and line).
 static bool lex_token(pbrt_lexer& lexer, pbrt_token& token, std::string& error) {
   skip_whitespace(lexer);
@@ -233,11 +335,13 @@ static bool lex_token(pbrt_lexer& lexer, pbrt_token& token, std::string& error) 
   }
   if (c == '"') {
     auto start = ++ptr;
+    auto bits  = (unsigned char)0;  // high bit set: not all ASCII
     while (ptr < end && *ptr != '"' && *ptr != '\n') {
       if (*ptr == '\\' && ptr + 1 < end && ptr[1] != '\n') {
         token.escaped = true;
         ptr++;
       }
+      bits |= (unsigned char)*ptr;
       ptr++;
     }
     if (ptr >= end || *ptr != '"') {
@@ -249,6 +353,16 @@ static bool lex_token(pbrt_lexer& lexer, pbrt_token& token, std::string& error) 
     token.kind = pbrt_token_kind::string;
     token.text = {start, (size_t)(ptr - start)};
     ptr++;
+    // Strings become names and json keys, which must be UTF-8.
+    auto invalid = (bits & 0x80) ? find_invalid_utf8(token.text) : std::string_view::npos;
+    if (invalid != std::string_view::npos) {
+      char byte[8];
+      std::snprintf(byte, sizeof(byte), "0x%02X", (unsigned)(unsigned char)token.text[invalid]);
+      error = lexer.filename + ":" + std::to_string(token.line) + ": string \"" +
+              printable(token.text) + "\" is not valid UTF-8 (byte " + byte + " at offset " +
+              std::to_string(invalid) + " in the string)";
+      return false;
+    }
     return true;
   }
   auto start = ptr;
@@ -490,6 +604,12 @@ struct pbrt_state {
   bool              has_film   = false;
 
   std::unordered_set<std::string> warned = {};
+
+  // Memory and work of the load, for the budget (see memory_in_use).
+  double scene_bytes  = 0;  // shapes, instances and textures in the scene
+  double text_bytes   = 0;  // text of open files read into memory
+  double param_bytes  = 0;  // capacity of the parameter value lists
+  double parsed_bytes = 0;  // text parsed so far, with every Include
 };
 
 static std::string location(const pbrt_state& state, int line = -1) {
@@ -506,6 +626,68 @@ static std::string directive_name(const pbrt_state& state) {
 static void set_error(pbrt_state& state, const std::string& message, int line = -1) {
   if (!state.error.empty()) return;
   state.error = location(state, line) + directive_name(state) + ": " + message;
+}
+
+// Memory the load holds: the scene so far, the text of the open files, the
+// parameter lists, and the parser's own state (blocks, materials, names;
+// bytes per table entry estimated). Checked against load_memory_limit after
+// each directive and before each large allocation, so repeated Includes of
+// small files cannot build an unbounded scene.
+static double memory_in_use(const pbrt_state& state) {
+  const auto entry_bytes = 64.0;  // a hash or tree node with a short name
+  auto       entries     = state.textures.size() + state.named_materials.size() +
+                 state.coordinate_systems.size() + state.scene_materials.size() +
+                 state.group_keys.size() + state.warned.size();
+  return state.scene_bytes + state.text_bytes + state.param_bytes +
+         (double)state.stack.size() * sizeof(pbrt_stack_entry) +
+         (double)state.materials.size() * (sizeof(material_data) + sizeof(std::string)) +
+         (double)state.groups.size() * sizeof(pbrt_curve_group) + entries * entry_bytes;
+}
+
+// Fails the directive with "FILE:LINE: DIRECTIVE: WHAT needs N MiB, over the
+// memory limit..." if `bytes` exceed the budget.
+static bool check_memory(pbrt_state& state, const std::string& what, double bytes, int line = -1) {
+  if (bytes <= load_memory_limit) return true;
+  auto error = std::string{};
+  check_load_memory(state.lexer->filename + ":" + std::to_string(line < 0 ? state.line : line),
+      directive_name(state) + ": " + what, bytes, error);
+  if (state.error.empty()) state.error = error;
+  return false;
+}
+
+// Bytes the scene keeps for a shape: its arrays, its instance and the names.
+static double shape_bytes(const shape_data& shape) {
+  return (double)shape.triangles.size() * sizeof(vec3i) +
+         (double)shape.lines.size() * sizeof(vec2i) +
+         (double)shape.curves.size() * sizeof(vec4i) +
+         (double)shape.positions.size() * sizeof(vec3f) +
+         (double)shape.normals.size() * sizeof(vec3f) +
+         (double)shape.texcoords.size() * sizeof(vec2f) +
+         (double)shape.radius.size() * sizeof(float) + sizeof(shape_data) +
+         sizeof(instance_data) + 2 * sizeof(std::string);
+}
+
+static double texture_bytes(const texture_data& texture) {
+  return (double)texture.pixels.size() * sizeof(vec3f) + sizeof(texture_data) +
+         sizeof(std::string);
+}
+
+// Checks that a file the scene names is a regular file before a reader opens
+// it: the PLY and image readers would read a device forever or wait on a
+// fifo for a writer.
+static bool check_regular_file(pbrt_state& state, const std::string& path, const std::string& name) {
+  struct stat info = {};
+  if (stat(path.c_str(), &info) != 0) {
+    set_error(state, "cannot find \"" + name + "\" (" + path + ")");
+    return false;
+  }
+  if (!S_ISREG(info.st_mode)) {
+    set_error(state, "\"" + name + "\" (" + path + ") is " +
+                         (S_ISDIR(info.st_mode) ? "a directory, not a file"
+                                                : "not a regular file (a device, fifo or socket)"));
+    return false;
+  }
+  return true;
 }
 
 static void add_warning(pbrt_state& state, const std::string& message) {
@@ -707,6 +889,22 @@ static bool is_integer(float value) {
   return value == std::floor(value) && std::abs(value) <= (float)(1 << 24);
 }
 
+// Doubles the capacity of a parameter's value list, checking the budget
+// first: a huge array fails at its line instead of exhausting memory. Lists
+// are reused by later directives, so their capacity stays counted.
+template <typename T>
+static bool grow_values(pbrt_state& state, const pbrt_param& param, std::vector<T>& values) {
+  auto capacity = std::max(2 * values.capacity(), (size_t)64);
+  auto growth   = (double)(capacity - values.capacity()) * sizeof(T);
+  // While the list grows, its old and new buffers coexist.
+  if (!check_memory(state, "the scene with parameter " + param_decl(param),
+          memory_in_use(state) + (double)capacity * sizeof(T), param.line))
+    return false;
+  values.reserve(capacity);
+  state.param_bytes += growth;
+  return true;
+}
+
 // Parses one value of a parameter into `param`.
 static bool parse_param_value(pbrt_state& state, pbrt_param& param,
     pbrt_value_kind kind, const pbrt_token& token) {
@@ -725,24 +923,28 @@ static bool parse_param_value(pbrt_state& state, pbrt_param& param,
     auto value = 0.0f;
     if (!parse_float(token.text, value)) return bad("a number");
     if (param.integer && !is_integer(value)) return bad("an integer (at most 2^24)");
+    if (param.numbers.size() == param.numbers.capacity() &&
+        !grow_values(state, param, param.numbers))
+      return false;
     param.numbers.push_back(value);
     return true;
   }
   if (token.kind == pbrt_token_kind::string || token.kind == pbrt_token_kind::word) {
     if (kind == pbrt_value_kind::bools) {
-      if (token.text == "true") {
-        param.numbers.push_back(1);
-      } else if (token.text == "false") {
-        param.numbers.push_back(0);
-      } else {
-        return bad("true or false");
-      }
+      if (token.text != "true" && token.text != "false") return bad("true or false");
+      if (param.numbers.size() == param.numbers.capacity() &&
+          !grow_values(state, param, param.numbers))
+        return false;
+      param.numbers.push_back(token.text == "true" ? 1 : 0);
       return true;
     }
     if (token.kind == pbrt_token_kind::word) return bad("a value");
     if (kind == pbrt_value_kind::numbers) return bad("a number");
     if (kind == pbrt_value_kind::spectrum && !param.numbers.empty())
       return bad("a number");
+    if (param.strings.size() == param.strings.capacity() &&
+        !grow_values(state, param, param.strings))
+      return false;
     param.strings.push_back(unescape_string(token));
     return true;
   }
@@ -802,6 +1004,9 @@ static bool parse_params(pbrt_state& state) {
               (number_end == lexer.end ||
                   (pbrt_char_class[(unsigned char)*number_end] & pbrt_delimiter)) &&
               (!param.integer || is_integer(value))) {
+            if (param.numbers.size() == param.numbers.capacity() &&
+                !grow_values(state, param, param.numbers))
+              return false;
             param.numbers.push_back(value);
             lexer.ptr = number_end;
             continue;
@@ -1153,11 +1358,13 @@ static bool parse_light_source(pbrt_state& state) {
       auto path = path_join(path_dirname(state.lexer->filename), map);
       auto ec   = std::error_code{};
       if (!std::filesystem::exists(path, ec)) {
-        add_warning(state, location(state) + directive_name(state) + ": environment map \"" +
-                               map + "\" not found; using a constant environment");
+        warn_once(state, "environment map " + map,
+            directive_name(state) + ": environment map \"" + map +
+                "\" not found; using a constant environment");
       } else {
         auto image = texture_data{};
         auto error = std::string{};
+        if (!check_regular_file(state, path, map)) return false;
         if (!load_image(path, image, error)) {
           set_error(state, "cannot load environment map: " + error);
           return false;
@@ -1168,13 +1375,22 @@ static bool parse_light_source(pbrt_state& state) {
                                  std::to_string(image.width) + "x" + std::to_string(image.height));
             return false;
           }
+          // The map and its resampling coexist until the map is dropped.
+          auto size = (double)std::max(image.width, 2);
+          if (!check_memory(state,
+                  "the scene with the equal-area map \"" + map + "\" resampled to " +
+                      "equirectangular",
+                  memory_in_use(state) + texture_bytes(image) + 2 * size * size * sizeof(vec3f)))
+            return false;
           image = equal_area_to_equirect(image);
         }
+        state.scene_bytes += texture_bytes(image);
         scene.textures.push_back(std::move(image));
         scene.texture_names.push_back(std::filesystem::path(map).stem().string());
         env.emission_tex = (int)scene.textures.size() - 1;
       }
     }
+    state.scene_bytes += sizeof(environment_data) + sizeof(std::string);
     scene.environments.push_back(env);
     scene.environment_names.push_back("environment" + std::to_string(scene.environments.size()));
   } else if (state.type == "distant") {
@@ -1189,6 +1405,7 @@ static bool parse_light_source(pbrt_state& state) {
       set_error(state, "\"from\" and \"to\" must differ");
       return false;
     }
+    state.scene_bytes += sizeof(distant_light_data);
     scene.distant_lights.push_back({direction, emission});
   } else {
     warn_once(state, "light " + std::string{state.type},
@@ -1221,7 +1438,12 @@ static int add_shape_instance(pbrt_state& state, shape_data&& shape, const char*
     for (auto& triangle : shape.triangles) std::swap(triangle.y, triangle.z);
     for (auto& normal : shape.normals) normal = -normal;
   }
-  auto  name  = std::string{kind} + std::to_string(scene.shapes.size() + 1);
+  // Shapes of a fixed size (sphere, disk) are made before this check: one
+  // is at most a few hundred KB over.
+  auto bytes = shape_bytes(shape);
+  if (!check_memory(state, "the scene with this shape", memory_in_use(state) + bytes)) return -1;
+  state.scene_bytes += bytes;
+  auto name = std::string{kind} + std::to_string(scene.shapes.size() + 1);
   scene.shapes.push_back(std::move(shape));
   scene.shape_names.push_back(name);
   scene.instances.push_back(
@@ -1330,10 +1552,15 @@ static bool parse_curve(pbrt_state& state) {
       }
     }
   }
-  // Append to the group's shape, chaining onto the previous curve's end.
+  // Append to the group's shape, chaining onto the previous curve's end; the
+  // directive's end checks the new total against the budget.
   auto& group = current_curve_group(state);
+  if (group.shape < 0) return false;
   auto& shape = state.scene->shapes[group.shape];
   auto  count = (int)segments.size();
+  state.scene_bytes +=
+      (double)count * (3 * (sizeof(vec3f) + sizeof(float)) + sizeof(vec4i)) +
+      sizeof(vec3f) + sizeof(float);
   for (auto s = 0; s < count; s++) {
     auto& b      = segments[s];
     auto  radius = [&](int k) {
@@ -1401,8 +1628,18 @@ static bool parse_triangle_mesh(pbrt_state& state) {
     set_error(state, "missing parameter \"point3 P\"");
     return false;
   }
-  auto shape       = shape_data{};
-  auto num_vertices = (int)points->size() / 3;
+  // The mesh is checked against the budget before it is built, at its
+  // final size (no growth by doubling).
+  auto num_vertices  = (int)points->size() / 3;
+  auto num_triangles = indices ? indices->size() / 3 : (size_t)1;
+  auto vertex_bytes  = sizeof(vec3f) + (normals ? sizeof(vec3f) : 0) + (uvs ? sizeof(vec2f) : 0);
+  if (!check_memory(state, "the scene with this mesh",
+          memory_in_use(state) + (double)num_vertices * vertex_bytes +
+              (double)num_triangles * sizeof(vec3i)))
+    return false;
+  auto shape = shape_data{};
+  shape.positions.reserve(num_vertices);
+  shape.triangles.reserve(num_triangles);
   for (auto i = 0; i < num_vertices; i++)
     shape.positions.push_back({(*points)[3 * i], (*points)[3 * i + 1], (*points)[3 * i + 2]});
   if (indices) {
@@ -1430,6 +1667,7 @@ static bool parse_triangle_mesh(pbrt_state& state) {
                            " normals for " + std::to_string(num_vertices) + " vertices");
       return false;
     }
+    shape.normals.reserve(num_vertices);
     for (auto i = 0; i < num_vertices; i++)
       shape.normals.push_back(safe_normalize(
           vec3f{(*normals)[3 * i], (*normals)[3 * i + 1], (*normals)[3 * i + 2]}));
@@ -1441,6 +1679,7 @@ static bool parse_triangle_mesh(pbrt_state& state) {
                            std::to_string(num_vertices) + " vertices");
       return false;
     }
+    shape.texcoords.reserve(num_vertices);
     for (auto i = 0; i < num_vertices; i++)
       shape.texcoords.push_back({(*uvs)[2 * i], (*uvs)[2 * i + 1]});
   }
@@ -1478,9 +1717,11 @@ static bool parse_shape(pbrt_state& state) {
       set_error(state, "missing parameter \"string filename\"");
       return false;
     }
+    auto path  = path_join(path_dirname(state.lexer->filename), filename);
     auto shape = shape_data{};
     auto error = std::string{};
-    if (!load_shape(path_join(path_dirname(state.lexer->filename), filename), shape, error)) {
+    if (!check_regular_file(state, path, filename)) return false;
+    if (!load_shape(path, shape, error)) {
       set_error(state, error);
       return false;
     }
@@ -1515,10 +1756,7 @@ static bool parse_include(pbrt_state& state) {
       return false;
     }
   }
-  if (!std::filesystem::exists(path, ec)) {
-    set_error(state, "cannot find \"" + std::string{name} + "\" (" + path + ")");
-    return false;
-  }
+  if (!check_regular_file(state, path, std::string{name})) return false;
   // The included file's directives report their own file and line.
   auto saved = std::tuple{state.lexer, state.directive, state.type, state.line};
   if (!parse_pbrt_file(state, path, (int)state.open_files.size())) return false;
@@ -1659,9 +1897,10 @@ static bool parse_directive(pbrt_state& state, std::string_view directive) {
     auto material = make_pbrt_material(state, type);
     state.materials.push_back(material);
     state.material_names.push_back(std::string{name});
+    // Once per name: warnings of an Include read many times stay few.
     if (state.named_materials.count(std::string{name}))
-      add_warning(state, location(state) + "MakeNamedMaterial: \"" + std::string{name} +
-                             "\" redefined");
+      warn_once(state, "redefined " + std::string{name},
+          "MakeNamedMaterial: \"" + std::string{name} + "\" redefined");
     state.named_materials[std::string{name}] = (int)state.materials.size() - 1;
   } else if (directive == "NamedMaterial") {
     auto name = std::string_view{};
@@ -1748,8 +1987,8 @@ static bool parse_directive(pbrt_state& state, std::string_view directive) {
         std::string{directive} + ": directive ignored");
     return skip_arguments(state);
   } else if (state.params.lenient) {
-    add_warning(state, location(state) + "unknown directive " + std::string{directive} +
-                           " skipped");
+    warn_once(state, "unknown directive " + std::string{directive},
+        "unknown directive " + std::string{directive} + " skipped");
     return skip_arguments(state);
   } else {
     set_error(state, "unknown directive (use --lenient to skip it)");
@@ -1760,32 +1999,59 @@ static bool parse_directive(pbrt_state& state, std::string_view directive) {
   return true;
 }
 
+// The text read for one scene, with every Include, is bounded by 4 times the
+// memory budget. Real curve files hold about 3.5 bytes of text per byte of
+// scene, and a scene must leave room for its BVH, so a scene that renders
+// has less text than that; more can only come from Includes repeated over
+// and over (8 Includes in each of 11 files are 8^10 parses). An Include
+// counts as at least 1 MiB, so a tree of tiny files stops within seconds too:
+// resolving, opening and mapping a file takes some 25 us, as long as parsing
+// a few MiB of text.
+const auto max_text_per_budget = 4.0;
+const auto min_include_bytes   = 1024.0 * 1024;
+
 static bool parse_pbrt_file(pbrt_state& state, const std::string& filename, int depth) {
+  // Errors of the file as a whole name the including directive too, if any.
+  auto fail = [&](const std::string& error) {
+    if (state.lexer) {
+      set_error(state, error);
+    } else {
+      state.error = error;
+    }
+    return false;
+  };
   if (depth > 64) {
     set_error(state, "includes nested too deeply");
     return false;
   }
+  auto error = std::string{};
+  auto size  = (size_t)0;
+  auto fd    = open_regular_file(filename, size, error);
+  if (fd < 0) return fail(error);
   auto lexer     = pbrt_lexer{};
   lexer.filename = filename;
   auto mapping   = pbrt_file_mapping{};
-  if (map_file(filename, mapping)) {
+  if (map_file(fd, size, filename, mapping)) {
+    close(fd);
     lexer.ptr = (const char*)mapping.data;
     lexer.end = lexer.ptr + mapping.size;
   } else {
-    auto error = std::string{};
-    if (!read_whole_file(filename, lexer.data, error)) {
-      // Name the including directive too, if any.
-      if (state.lexer) {
-        set_error(state, error);
-      } else {
-        state.error = error;
-      }
-      return false;
-    }
+    if (!read_open_file(fd, size, filename, lexer.data, error, memory_in_use(state)))
+      return fail(error);
     lexer.ptr = lexer.data.data();
     lexer.end = lexer.data.data() + lexer.data.size();
   }
-  auto ec   = std::error_code{};
+  state.parsed_bytes += std::max((double)(lexer.end - lexer.ptr), min_include_bytes);
+  auto max_parsed = max_text_per_budget * load_memory_limit;
+  if (state.parsed_bytes > max_parsed)
+    return fail(filename + ": the scene's text with its Includes comes to over " +
+                std::to_string((long long)(max_parsed / (1 << 20))) + " MiB, " +
+                std::to_string((int)max_text_per_budget) +
+                " times the memory limit (--max-memory; an Include counts as at least " +
+                std::to_string((int)(min_include_bytes / (1 << 20))) + " MiB)");
+  auto text_bytes = (double)lexer.data.capacity();
+  state.text_bytes += text_bytes;
+  auto ec        = std::error_code{};
   auto canonical = std::filesystem::weakly_canonical(filename, ec).string();
   state.open_files.push_back(ec ? filename : canonical);
   state.lexer = &lexer;
@@ -1806,8 +2072,12 @@ static bool parse_pbrt_file(pbrt_state& state, const std::string& filename, int 
       if (state.error.empty()) set_error(state, "cannot parse directive");
       return false;
     }
+    // What the directive added, within the budget.
+    auto memory = memory_in_use(state);
+    if (memory > load_memory_limit && !check_memory(state, "the scene", memory)) return false;
   }
   state.open_files.pop_back();
+  state.text_bytes -= text_bytes;
   return true;
 }
 
@@ -1830,14 +2100,36 @@ bool load_pbrt_scene(const std::string& filename, scene_data& scene, std::string
     add_warning(state, filename + ": " + std::to_string(state.stack.size()) +
                            " unclosed AttributeBegin/TransformBegin block(s)");
   }
+  // An empty file, or one whose world is missing, would render black.
+  if (scene.shapes.empty() && scene.environments.empty() && !params.allow_empty) {
+    error = filename + ": nothing to render: no shapes and no environment light";
+    scene = {};
+    return false;
+  }
   // Without a Film directive, pbrt-v3's default 640x480 gives the aspect; the
   // resolution stays unset for the renderer to choose.
   auto film = state.has_film ? state.film : vec2i{640, 480};
   scene.cameras.push_back(make_pbrt_camera(state.camera, film));
   scene.camera_names.push_back("camera");
   if (params.curves_as_lines) {
-    for (auto& shape : scene.shapes)
-      if (!shape.curves.empty()) shape = curves_to_lines(shape, params.segments);
+    auto segments = std::max(params.segments, 1);
+    for (auto& shape : scene.shapes) {
+      if (shape.curves.empty()) continue;
+      // Each curve gives `segments` lines and at most `segments` + 1
+      // vertices; the curves are dropped once converted.
+      auto curves = (double)shape.curves.size();
+      auto lines  = curves * segments * sizeof(vec2i) +
+                   curves * (segments + 1) * (sizeof(vec3f) + sizeof(float));
+      if (!check_load_memory(filename,
+              "the scene with curves as lines (" + std::to_string(segments) + " segments each)",
+              memory_in_use(state) + lines, error)) {
+        scene = {};
+        return false;
+      }
+      state.scene_bytes -= shape_bytes(shape);
+      shape = curves_to_lines(shape, segments);
+      state.scene_bytes += shape_bytes(shape);
+    }
   }
   return validate_loaded_scene(scene, filename, error);
 }

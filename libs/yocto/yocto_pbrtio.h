@@ -45,10 +45,19 @@ struct pbrt_params {
   bool lenient         = false;  // unknown directives become warnings
   bool curves_as_lines = false;  // tessellate Bezier curves into line segments
   int  segments        = 4;      // segments per Bezier curve when curves_as_lines
+  bool allow_empty     = false;  // accept a scene with nothing to render (camera only)
 };
 
 // Loads a pbrt-v3 or pbrt-v4 scene (plain or .gz) into the scene model.
 // Warnings are appended to `warnings` if given, printed to stderr otherwise.
+// A scene without shapes or an environment light is an error unless
+// params.allow_empty. Strings must be UTF-8; the files the scene names must
+// be regular files. The load keeps within load_memory_limit (yocto_sceneio.h):
+// the scene so far, the text of open files, parameter lists and the
+// resampling of environment maps are checked before they grow past it; a
+// .gz file may inflate to at most 100 times its size (past 16 MiB); and the
+// text read with all Includes, each counted as at least 1 MiB, to at most
+// 4 times the limit.
 bool load_pbrt_scene(const std::string& filename, scene_data& scene,
     std::string& error, const pbrt_params& params = {},
     std::vector<std::string>* warnings = nullptr);
