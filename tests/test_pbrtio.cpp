@@ -5,6 +5,7 @@
 //
 
 #include <gtest/gtest.h>
+#include <sys/stat.h>
 #include <unistd.h>
 #include <yocto/yocto_pbrtio.h>
 #include <yocto/yocto_sceneio.h>
@@ -1050,4 +1051,36 @@ TEST(pbrtio, bad_hair_files) {
   EXPECT_FALSE(save_hair_model(dir / "empty.hair", shape_data{}, error));
   EXPECT_FALSE(fs::exists(dir / "empty.hair"));
   EXPECT_EQ(std::distance(fs::directory_iterator(dir.path), fs::directory_iterator{}), 7);
+}
+
+TEST(pbrtio, hair_header_counts_devices_and_memory_are_checked_first) {
+  auto dir   = temp_dir{};
+  auto shape = shape_data{};
+  auto error = std::string{};
+  auto positions = std::vector<float>{0, 0, 0, 1, 0, 0, 2, 0, 0};
+  // Four billion strands of no points and no segments array: refused by the
+  // header's counts before any loop over the strands.
+  write_hair(dir / "strands.hair", 4000000000u, 0, 2, 0, {}, {});
+  EXPECT_FALSE(load_hair_model(dir / "strands.hair", shape, error));
+  EXPECT_TRUE(contains(error, "strands.hair") && contains(error, "4000000000 strands") &&
+              contains(error, "0 points"))
+      << error;
+  // A device or a fifo named as a model is refused, not read forever.
+  fs::create_symlink("/dev/zero", dir / "zero.hair");
+  EXPECT_FALSE(load_hair_model(dir / "zero.hair", shape, error));
+  EXPECT_TRUE(contains(error, "zero.hair") && contains(error, "not a regular file")) << error;
+  ASSERT_EQ(mkfifo((dir / "fifo.hair").c_str(), 0600), 0);
+  EXPECT_FALSE(load_hair_model(dir / "fifo.hair", shape, error));
+  EXPECT_TRUE(contains(error, "fifo.hair") && contains(error, "not a regular file")) << error;
+  // The points against the memory limit.
+  write_hair(dir / "model.hair", 1, 3, 2, 2, {}, positions);
+  auto limit        = load_memory_limit;
+  load_memory_limit = 100;
+  auto loaded       = load_hair_model(dir / "model.hair", shape, error);
+  load_memory_limit = limit;
+  EXPECT_FALSE(loaded);
+  EXPECT_TRUE(contains(error, "model.hair: the spline through 3 points needs") &&
+              contains(error, "over the memory limit"))
+      << error;
+  EXPECT_TRUE(load_hair_model(dir / "model.hair", shape, error)) << error;
 }
