@@ -561,6 +561,12 @@ bool check_trace_params(const scene_data& scene, const trace_params& params,
   return true;
 }
 
+double trace_image_bytes(const scene_data& scene, const trace_params& params) {
+  auto size = camera_resolution(scene.cameras[params.camera], params.resolution);
+  return (double)size.x * (double)size.y *
+         (sizeof(glm::dvec3) + sizeof(vec3f) + 3 * sizeof(uint8_t));
+}
+
 void init_trace_state(trace_state& state, const scene_data& scene, const trace_params& params) {
   auto size     = camera_resolution(scene.cameras[params.camera], params.resolution);
   state.width   = size.x;
