@@ -8,20 +8,20 @@
 // limits (Embree and TBB reserve about 1 GiB of address space).
 //
 
-#include <fcntl.h>
 #include <gtest/gtest.h>
 #include <sys/resource.h>
 #include <sys/wait.h>
 #include <unistd.h>
-#include <yocto/yocto_sceneio.h>
 
 #include <cstdint>
 #include <filesystem>
-#include <fstream>
 #include <sstream>
 #include <vector>
 
+#include "test_sceneio.h"
+
 using namespace yocto;
+using namespace yocto_test;
 namespace fs = std::filesystem;
 
 // -----------------------------------------------------------------------------
@@ -83,28 +83,6 @@ void expect_refused(const limited_result& result, const std::vector<std::string>
     EXPECT_NE(lines[0].find(part), std::string::npos) << lines[0] << "\nlacks: " << part;
 }
 
-// A fresh directory per test, removed at the end.
-struct test_directory {
-  fs::path path;
-  test_directory() {
-    auto info = ::testing::UnitTest::GetInstance()->current_test_info();
-    path      = fs::temp_directory_path() /
-           ("yocto-limits-" + std::to_string(getpid()) + "-" + info->name());
-    fs::remove_all(path);
-    fs::create_directories(path);
-  }
-  ~test_directory() {
-    auto ec = std::error_code{};
-    fs::remove_all(path, ec);
-  }
-  std::string operator/(const std::string& name) const { return (path / name).string(); }
-};
-
-void write_file(const std::string& filename, const std::string& data) {
-  auto stream = std::ofstream(filename, std::ios::binary);
-  stream.write(data.data(), (std::streamsize)data.size());
-}
-
 // A json scene: a camera, a grey material, and the given groups.
 std::string make_json(const std::string& groups) {
   return R"({"cameras": [{"lookat": [0, 0, 4, 0, 0, 0, 0, 1, 0]}],
@@ -130,16 +108,6 @@ std::string make_byte_ply(int count) {
   return data;
 }
 
-// PNG's chunk checksum (ISO 3309 CRC-32), to patch a header.
-uint32_t png_crc(const std::string& bytes) {
-  auto crc = 0xffffffffu;
-  for (auto byte : bytes) {
-    crc ^= (uint8_t)byte;
-    for (auto k = 0; k < 8; k++) crc = (crc >> 1) ^ (0xedb88320u & (0u - (crc & 1)));
-  }
-  return ~crc;
-}
-
 }  // namespace
 
 // -----------------------------------------------------------------------------
@@ -147,54 +115,48 @@ uint32_t png_crc(const std::string& bytes) {
 // -----------------------------------------------------------------------------
 
 TEST(limits, a_tiny_scene_renders_under_the_limits) {
-  auto dir = test_directory{};
-  write_file(dir / "quad.ply", make_byte_ply(3));
-  write_file(dir / "scene.json",
+  auto dir = scratch_directory("limits-tiny");
+  write_file(dir.file("quad.ply"), make_byte_ply(3));
+  write_file(dir.file("scene.json"),
       make_json(R"("environments": [{"emission": [1, 1, 1]}],
         "shapes": [{"uri": "quad.ply"}], "instances": [{"shape": 0, "material": 0}])"));
   auto result = run_limited(
-      {"render", dir / "scene.json", "-o", dir / "out.png", "-s", "2", "-r", "16", "-t", "1"});
+      {"render", dir.file("scene.json"), "-o", dir.file("out.png"), "-s", "2", "-r", "16", "-t", "1"});
   EXPECT_EQ(result.status, 0) << result.output;
-  EXPECT_TRUE(fs::exists(dir / "out.png"));
+  EXPECT_TRUE(fs::exists(dir.file("out.png")));
 }
 
 TEST(limits, image_headers_claiming_gigapixels_are_refused) {
   // A 19-byte PGM claiming 46000x46000 pixels as a sky; then a PNG (a
   // valid 2x2 one written by yscene, its header patched to 19000x19000).
-  auto dir = test_directory{};
-  write_file(dir / "big.pgm", "P5\n46000 46000\n255\n");
-  write_file(dir / "scene.json", make_sky_json("big.pgm"));
-  expect_refused(run_limited({"render", dir / "scene.json", "-o", dir / "out.png"}),
+  auto dir = scratch_directory("limits-images");
+  write_file(dir.file("big.pgm"), "P5\n46000 46000\n255\n");
+  write_file(dir.file("scene.json"), make_sky_json("big.pgm"));
+  expect_refused(run_limited({"render", dir.file("scene.json"), "-o", dir.file("out.png")}),
       {"scene.json", "big.pgm", "46000x46000"});
   auto small = texture_data{2, 2, std::vector<vec3f>(4, vec3f{0.5f, 0.5f, 0.5f})};
   auto error = std::string{};
-  ASSERT_TRUE(save_image(dir / "small.png", small, error)) << error;
-  auto png = std::string{};
-  ASSERT_TRUE(load_text(dir / "small.png", png, error)) << error;
-  ASSERT_EQ(png.substr(12, 4), "IHDR");
-  for (auto offset : {16, 20}) png.replace(offset, 4, std::string("\0\0\x4a\x38", 4));
-  auto crc = png_crc(png.substr(12, 17));
-  for (auto k = 0; k < 4; k++) png[29 + k] = (char)(crc >> (24 - 8 * k));
-  write_file(dir / "big.png", png);
-  write_file(dir / "scene.json", make_sky_json("big.png"));
-  expect_refused(run_limited({"render", dir / "scene.json", "-o", dir / "out.png"}),
+  ASSERT_TRUE(save_image(dir.file("small.png"), small, error)) << error;
+  write_file(dir.file("big.png"), patch_png_size(read_file(dir.file("small.png")), 19000, 19000));
+  write_file(dir.file("scene.json"), make_sky_json("big.png"));
+  expect_refused(run_limited({"render", dir.file("scene.json"), "-o", dir.file("out.png")}),
       {"scene.json", "big.png", "19000x19000"});
-  EXPECT_FALSE(fs::exists(dir / "out.png"));
+  EXPECT_FALSE(fs::exists(dir.file("out.png")));
 }
 
 TEST(limits, one_ply_named_by_20000_shapes_loads_once) {
   // 30 KB of PLY is 120 KB of shape: loaded 20000 times it would need 2.4 GB.
-  auto dir = test_directory{};
-  write_file(dir / "mesh.ply", make_byte_ply(10000));
+  auto dir = scratch_directory("limits-same-ply");
+  write_file(dir.file("mesh.ply"), make_byte_ply(10000));
   auto shapes = std::string{}, instances = std::string{};
   for (auto i = 0; i < 20000; i++) {
     shapes += std::string(i ? ", " : "") + R"({"uri": "mesh.ply"})";
     instances += std::string(i ? ", " : "") + R"({"shape": )" + std::to_string(i) +
                  R"(, "material": 0})";
   }
-  write_file(dir / "scene.json",
+  write_file(dir.file("scene.json"),
       make_json(R"("shapes": [)" + shapes + R"(], "instances": [)" + instances + "]"));
-  auto result = run_limited({"info", dir / "scene.json"});
+  auto result = run_limited({"info", dir.file("scene.json")});
   EXPECT_EQ(result.status, 0) << result.output;
   EXPECT_NE(result.output.find("shapes:       1\n"), std::string::npos) << result.output;
   EXPECT_NE(result.output.find("instances:    20000\n"), std::string::npos) << result.output;
@@ -202,45 +164,45 @@ TEST(limits, one_ply_named_by_20000_shapes_loads_once) {
 
 TEST(limits, render_buffers_are_checked_before_allocating) {
   // 65536 pixels wide is a 100 GB render, from the scene or the command line.
-  auto dir = test_directory{};
-  write_file(dir / "scene.json",
+  auto dir = scratch_directory("limits-buffers");
+  write_file(dir.file("scene.json"),
       R"({"settings": {"resolution": 65536},)" + make_json("").substr(1));
-  expect_refused(run_limited({"render", dir / "scene.json", "-o", dir / "out.exr"}),
+  expect_refused(run_limited({"render", dir.file("scene.json"), "-o", dir.file("out.exr")}),
       {"scene.json", "resolution 65536 (the scene's settings)", "65536x43691"});
-  expect_refused(run_limited({"render", dir / "scene.json", "-o", dir / "out.exr", "-r",
+  expect_refused(run_limited({"render", dir.file("scene.json"), "-o", dir.file("out.exr"), "-r",
                      "40000", "--max-memory", "1G"}),
       {"scene.json", "resolution 40000 (--resolution)", "over the memory limit of 1024 MiB"});
-  EXPECT_FALSE(fs::exists(dir / "out.exr"));
+  EXPECT_FALSE(fs::exists(dir.file("out.exr")));
 }
 
 TEST(limits, hair_headers_and_devices_are_refused_at_once) {
   // A .hair header claiming four billion strands of no points; then a shape
   // and a texture naming /dev/zero, which would read forever.
-  auto dir    = test_directory{};
+  auto dir    = scratch_directory("limits-hair-devices");
   auto header = std::string("HAIR", 4);
   for (uint32_t value : {4000000000u, 0u, 2u, 0u}) header.append((const char*)&value, 4);
   header.resize(128, '\0');
-  write_file(dir / "bomb.hair", header);
-  expect_refused(run_limited({"info", dir / "bomb.hair"}), {"bomb.hair", "4000000000 strands"});
-  write_file(dir / "shape.json",
+  write_file(dir.file("bomb.hair"), header);
+  expect_refused(run_limited({"info", dir.file("bomb.hair")}), {"bomb.hair", "4000000000 strands"});
+  write_file(dir.file("shape.json"),
       make_json(R"("shapes": [{"uri": "/dev/zero"}], "instances": [{"shape": 0, "material": 0}])"));
-  expect_refused(run_limited({"info", dir / "shape.json"}),
+  expect_refused(run_limited({"info", dir.file("shape.json")}),
       {"shape.json", "/dev/zero", "not a regular file"});
-  write_file(dir / "sky.json", make_sky_json("/dev/zero"));
-  expect_refused(run_limited({"convert", dir / "sky.json", dir / "out.json"}),
+  write_file(dir.file("sky.json"), make_sky_json("/dev/zero"));
+  expect_refused(run_limited({"convert", dir.file("sky.json"), dir.file("out.json")}),
       {"sky.json", "/dev/zero", "not a regular file"});
-  EXPECT_FALSE(fs::exists(dir / "out.json"));
+  EXPECT_FALSE(fs::exists(dir.file("out.json")));
 }
 
 TEST(limits, max_memory_option_sets_the_limit_of_every_load) {
-  auto dir = test_directory{};
-  write_file(dir / "mesh.ply", make_byte_ply(100000));
-  write_file(dir / "scene.json", make_json(R"("shapes": [{"uri": "mesh.ply"}],
+  auto dir = scratch_directory("limits-max-memory");
+  write_file(dir.file("mesh.ply"), make_byte_ply(100000));
+  write_file(dir.file("scene.json"), make_json(R"("shapes": [{"uri": "mesh.ply"}],
       "instances": [{"shape": 0, "material": 0}])"));
-  expect_refused(run_limited({"info", dir / "scene.json", "--max-memory", "1M"}),
+  expect_refused(run_limited({"info", dir.file("scene.json"), "--max-memory", "1M"}),
       {"scene.json", "over the memory limit of 1 MiB (--max-memory)"});
-  auto result = run_limited({"info", dir / "scene.json", "--max-memory", "64M"});
+  auto result = run_limited({"info", dir.file("scene.json"), "--max-memory", "64M"});
   EXPECT_EQ(result.status, 0) << result.output;
-  expect_refused(run_limited({"info", dir / "scene.json", "--max-memory", "lots"}),
+  expect_refused(run_limited({"info", dir.file("scene.json"), "--max-memory", "lots"}),
       {"--max-memory lots"});
 }
