@@ -354,6 +354,8 @@ TEST(scene, validation_refuses_what_the_ray_tracer_cannot_trace) {
   auto light = scene;
   light.distant_lights.push_back({{3e38f, 3e38f, 0}, {1, 1, 1}});
   expect_refused(light, {"distant light 0", "direction"});
+  light.distant_lights[0].direction = {0, 0, 0};
+  expect_refused(light, {"distant light 0", "direction [0 0 0]"});
 }
 
 TEST(bvh, bent_curves_split_into_exact_pieces_hit_like_whole_ones) {

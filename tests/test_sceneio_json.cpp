@@ -779,7 +779,7 @@ TEST(json, each_file_loads_once_and_the_sum_fits_the_memory_limit) {
   auto loaded       = load_scene(dir.file("three.json"), scene, error);
   load_memory_limit = limit;
   EXPECT_FALSE(loaded);
-  EXPECT_TRUE(contains(error, dir.file("three.json") + ": the shapes loaded up to shape \"c\"") &&
+  EXPECT_TRUE(contains(error, dir.file("three.json") + ": loading the shapes up to shape \"c\"") &&
               contains(error, "over the memory limit"))
       << error;
 }

@@ -292,7 +292,7 @@ bool validate_scene(const scene_data& scene, std::string& error) {
   }
   for (auto i = 0; i < (int)scene.distant_lights.size(); i++) {
     auto direction = scene.distant_lights[i].direction;
-    if (!isfinite(direction) || std::abs(length(normalize(direction)) - 1) > 1e-3f) {
+    if (!(std::abs(length(normalize(direction)) - 1) <= 1e-3f)) {  // false for NaN
       error = "distant light " + std::to_string(i) + ": direction [" +
               format_number(direction.x) + " " + format_number(direction.y) + " " +
               format_number(direction.z) + "] does not normalize to a unit vector";

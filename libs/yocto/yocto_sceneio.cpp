@@ -1797,7 +1797,7 @@ static bool load_scene_json(json_loader& loader, scene_data& scene) {
       return json_fail(loader, shape_labels[i] + ": " + error);
     total += shape_bytes(scene.shapes[i]);
     if (!check_load_memory(loader.filename,
-            "the shapes loaded up to " + shape_labels[i], total, loader.error))
+            "loading the shapes up to " + shape_labels[i], total, loader.error))
       return false;
   }
   for (auto i = 0; i < (int)scene.textures.size(); i++) {
@@ -1806,7 +1806,7 @@ static bool load_scene_json(json_loader& loader, scene_data& scene) {
       return json_fail(loader, texture_labels[i] + ": " + error);
     total += scene.textures[i].pixels.size() * sizeof(vec3f);
     if (!check_load_memory(loader.filename,
-            "the shapes and textures loaded up to " + texture_labels[i], total, loader.error))
+            "loading the shapes and textures up to " + texture_labels[i], total, loader.error))
       return false;
   }
 
