@@ -9,7 +9,9 @@
 #include <atomic>
 #include <chrono>
 #include <csignal>
+#include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 #include <yocto/yocto_bvh.h>
 #include <yocto/yocto_hairgen.h>
@@ -76,6 +78,21 @@ static std::string format_count(double count) {
 template <typename Enum, size_t size>
 static Enum enum_from_name(const std::array<std::string, size>& names, const std::string& name) {
   return (Enum)(std::find(names.begin(), names.end(), name) - names.begin());
+}
+
+// Bytes from --max-memory: a positive number, plain or with a K, M, G or T
+// suffix (powers of 1024), e.g. 4G or 1.5G.
+static bool parse_memory_size(const std::string& text, double& bytes) {
+  auto end   = (char*)nullptr;
+  auto value = std::strtod(text.c_str(), &end);
+  if (end == text.c_str()) return false;
+  auto suffix = std::string(end);
+  auto units  = std::string("KMGT");
+  auto unit   = suffix.size() == 1 ? units.find((char)std::toupper((unsigned char)suffix[0]))
+                                   : std::string::npos;
+  if (!suffix.empty() && unit == std::string::npos) return false;
+  bytes = suffix.empty() ? value : std::ldexp(value, 10 * (int)(unit + 1));
+  return std::isfinite(bytes) && bytes >= 1;
 }
 
 // Peak resident memory of this process in bytes.
@@ -262,7 +279,16 @@ static int run_render(const render_options& options, trace_params params,
       return print_error(options.scene + ": no camera named " + options.camera);
     params.camera = (int)(found - scene.camera_names.begin());
   }
-  if (!check_trace_params(scene, params, error)) return print_error(error);
+  if (!check_trace_params(scene, params, error)) return print_error(options.scene + ": " + error);
+  // The image buffers, before they are allocated.
+  auto size = camera_resolution(scene.cameras[params.camera], params.resolution);
+  auto from = command.count("--resolution") ? std::string(" (--resolution)")
+                                            : std::string(" (the scene's settings)");
+  if (!check_load_memory(options.scene,
+          "a render at resolution " + std::to_string(params.resolution) + from + ", " +
+              std::to_string(size.x) + "x" + std::to_string(size.y) + " pixels,",
+          trace_image_bytes(scene, params), error))
+    return print_error(error);
   if (!check_render_output(options, params, error)) return print_error(error);
   auto load_time = seconds_since(start);
 
@@ -638,9 +664,19 @@ static int run_main(int argc, const char** argv) {
       "render, then cast the same rays through Embree alone and compare rays/s "
       "(no image is written; use few samples: every ray is kept in memory)");
 
+  // Every command that loads a scene takes the memory limit of the load.
+  auto max_memory     = std::string{};
+  auto add_max_memory = [&](CLI::App* command) {
+    command->add_option("--max-memory", max_memory,
+        "memory a load may use: bytes or with a K, M or G suffix, e.g. 4G (default: 3/4 of "
+        "physical memory, or of ulimit -v if lower)");
+  };
+  add_max_memory(render);
+
   auto info_scene = std::string{};
   auto info       = app.add_subcommand("info", "print scene statistics");
   info->add_option("scene", info_scene, "scene (json, pbrt or hair)")->required();
+  add_max_memory(info);
 
   auto convert_in = std::string{}, convert_out = std::string{}, curves_mode = std::string{"native"};
   auto pbrt       = pbrt_params{};
@@ -652,6 +688,7 @@ static int run_main(int argc, const char** argv) {
   convert->add_option("--segments", pbrt.segments, "line segments per curve")
       ->check(CLI::Range(1, 64));
   convert->add_flag("--lenient", pbrt.lenient, "unknown pbrt directives are warnings");
+  add_max_memory(convert);
 
   auto hair_opts     = hair_options{};
   auto hair_params   = hair_style_params{};
@@ -671,6 +708,7 @@ static int run_main(int argc, const char** argv) {
       ->required();
   hair->add_option("--fit-camera", hair_opts.fit_camera,
       "place the strands where this scene's first camera looks (pbrt: read up to WorldBegin)");
+  add_max_memory(hair);
   hair->add_option("--fit-fraction", hair_opts.fit_fraction,
           "with --fit-camera: fraction of the image the strands span")
       ->check(CLI::Range(0.01f, 1.0f));
@@ -701,6 +739,9 @@ static int run_main(int argc, const char** argv) {
     auto code = app.exit(e);
     return code == 0 ? 0 : 1;
   }
+  if (!max_memory.empty() && !parse_memory_size(max_memory, load_memory_limit))
+    return print_error("--max-memory " + max_memory +
+                       ": expected a number of bytes, optionally with a K, M or G suffix (e.g. 4G)");
 
   if (render->parsed()) {
     params.sampler  = enum_from_name<trace_sampler_type>(trace_sampler_names, sampler);

@@ -168,6 +168,37 @@ TEST(cli, singular_frames_are_errors_not_embree_asserts) {
   EXPECT_FALSE(fs::exists(dir / "out.json"));
 }
 
+TEST(cli, extreme_cameras_are_errors_not_embree_asserts) {
+  // Finite values whose rays Embree would abort on (SIGABRT in Debian's
+  // build), from json and from pbrt, are refused at load naming file and
+  // element (the other cases are unit tests of validate_scene).
+  auto dir = make_test_dir("extreme");
+  write_small_scene(dir);  // for shapes/sphere.ply
+  auto objects = std::string(R"("shapes": [{"name": "sphere", "uri": "shapes/sphere.ply"}],
+    "materials": [{"name": "grey", "color": [0.5, 0.5, 0.5]}],
+    "instances": [{"name": "ball", "shape": 0, "material": 0}])");
+  auto out     = (dir / "out.png").string();
+  write_file(dir / "far.json", R"({"cameras": [{"name": "cam", "frame": )"
+                               R"([1, 0, 0, 0, 1, 0, 0, 0, 1, 1e19, 0, 4]}], )" + objects + "}");
+  auto far = run_yscene("render " + (dir / "far.json").string() + " -o " + out + " -s 1 -r 8");
+  expect_failure(far, "far.json");
+  EXPECT_NE(far.output.find("camera \"cam\": position 1e+19 is outside the range"),
+      std::string::npos) << far.output;
+  write_file(dir / "lens.json", R"({"cameras": [{"name": "cam", "aperture": 3e38}], )" +
+                                    objects + "}");
+  auto lens = run_yscene("render " + (dir / "lens.json").string() + " -o " + out + " -s 1 -r 8");
+  expect_failure(lens, "lens.json");
+  EXPECT_NE(lens.output.find("aperture 3e+38 give rays the ray tracer cannot trace"),
+      std::string::npos) << lens.output;
+  write_file(dir / "far.pbrt", "LookAt 1e19 0 5 0 0 0 0 1 0\nCamera \"perspective\"\n"
+                               "WorldBegin\nShape \"sphere\"\n");
+  auto pbrt = run_yscene("render " + (dir / "far.pbrt").string() + " -o " + out + " -s 1 -r 8");
+  expect_failure(pbrt, "far.pbrt");
+  EXPECT_NE(pbrt.output.find("position 1e+19 is outside the range"), std::string::npos)
+      << pbrt.output;
+  EXPECT_FALSE(fs::exists(out));
+}
+
 TEST(cli, unknown_output_extension) {
   auto dir = make_test_dir("extension");
   write_small_scene(dir);

@@ -286,6 +286,78 @@ TEST(bvh, occlusion_and_misses) {
   EXPECT_GT(bvh.peak_memory, 0);
 }
 
+// Rays Embree would abort on (origin or direction beyond its range, NaN or
+// zero directions) are misses for closest hits and occluded for shadow rays.
+TEST(bvh, untraceable_rays_are_refused_not_aborted) {
+  auto scene = make_straight_fiber_scene(false, 0.1f, identity3x4f);
+  auto bvh   = scene_bvh{};
+  auto error = std::string{};
+  ASSERT_TRUE(make_scene_bvh(bvh, scene, {}, error)) << error;
+  auto nan = std::nanf("");
+  for (auto ray : {ray3f{{1e19f, 0, 3}, {0, 0, -1}}, ray3f{{0, 0, 3}, {0, 0, -3e38f}},
+           ray3f{{0, 0, 3}, {nan, 0, -1}}, ray3f{{0, 0, 3}, {0, 0, 0}},
+           ray3f{{0, 0, 3}, {0, 0, -1}, nan}}) {
+    EXPECT_FALSE(is_traceable_ray(ray));
+    EXPECT_FALSE(intersect_scene_bvh(bvh, ray).hit);
+    EXPECT_TRUE(intersect_scene_bvh_any(bvh, ray));
+  }
+  EXPECT_TRUE(is_traceable_ray({{1e18f, 0, 3}, {0, 0, -1}}));
+}
+
+// Scenes whose rays or geometry leave the range the ray tracer accepts are
+// refused by validation, naming the element and the value.
+TEST(scene, validation_refuses_what_the_ray_tracer_cannot_trace) {
+  auto scene = make_straight_fiber_scene(false, 0.1f, identity3x4f);
+  auto error = std::string{};
+  scene.cameras.push_back({});
+  scene.camera_names.push_back("cam");
+  ASSERT_TRUE(validate_scene(scene, error)) << error;
+  auto expect_refused = [&](const scene_data& bad, const std::vector<std::string>& parts) {
+    auto message = std::string{};
+    EXPECT_FALSE(validate_scene(bad, message));
+    for (auto& part : parts)
+      EXPECT_NE(message.find(part), std::string::npos) << message << "\nlacks: " << part;
+  };
+  auto far = scene;
+  far.cameras[0].frame.o = {1e19f, 0, 0};
+  expect_refused(far, {"camera \"cam\"", "position 1e+19", "outside the range"});
+  auto cameras = std::vector<std::pair<camera_data, std::string>>{};
+  auto camera = camera_data{};
+  camera.lens = 1e-45f;
+  cameras.push_back({camera, "lens 1.4013e-45"});
+  camera = {};
+  camera.aperture = 3e38f;
+  cameras.push_back({camera, "aperture 3e+38"});
+  camera = {};
+  camera.film = 3e38f;
+  cameras.push_back({camera, "film 3e+38"});
+  camera = {};
+  camera.focus = 3e38f, camera.aperture = 0.1f;
+  cameras.push_back({camera, "focus 3e+38"});
+  camera = {};
+  camera.orthographic = true, camera.focus = 1e30f;
+  cameras.push_back({camera, "focus 1e+30"});
+  for (auto& [bad_camera, part] : cameras) {
+    auto bad = scene;
+    bad.cameras[0] = bad_camera;
+    expect_refused(bad, {"camera \"cam\"", part, "cannot trace"});
+  }
+  auto vertex = scene;
+  vertex.shapes[0].positions[1].y = -1e19f;
+  expect_refused(vertex, {"vertex 1", "position -1e+19"});
+  auto radius = scene;
+  radius.shapes[0].radius[0] = 1e19f;
+  expect_refused(radius, {"vertex 0", "radius 1e+19"});
+  auto placed = scene;
+  placed.instances[0].frame = translation_frame({0, 2e16f, 0});
+  expect_refused(placed, {"instance 0", "2e+16"});
+  auto light = scene;
+  light.distant_lights.push_back({{3e38f, 3e38f, 0}, {1, 1, 1}});
+  expect_refused(light, {"distant light 0", "direction"});
+  light.distant_lights[0].direction = {0, 0, 0};
+  expect_refused(light, {"distant light 0", "direction [0 0 0]"});
+}
+
 TEST(bvh, bent_curves_split_into_exact_pieces_hit_like_whole_ones) {
   // Helical strands of Bezier segments (quarter turns, radius 0.02 against a
   // helix of radius 0.3) are given to Embree in pieces (max_curve_pieces 4)

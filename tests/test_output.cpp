@@ -325,7 +325,7 @@ TEST(cli, unwritable_outputs_fail_before_the_render) {
   EXPECT_TRUE(contains(result.output, "is a directory")) << result.output;
   EXPECT_FALSE(contains(result.output, "rendered")) << result.output;
   // A JPEG larger than the format allows is refused before the work.
-  result = run_yscene("render " + scene + " -o " + dir.file("big.jpg") + " -s 1 -r 65536 -q");
+  result = run_yscene("render " + scene + " -o " + dir.file("big.jpg") + " -s 1 -r 65536 --max-memory 1T -q");
   EXPECT_EQ(result.status, 1) << result.output;
   EXPECT_TRUE(contains(result.output, "65500")) << result.output;
   // A failure after the output's folders were made removes them.

@@ -1014,20 +1014,25 @@ TEST(pbrtio, generated_geometry_is_bounded) {
 }
 
 TEST(pbrtio, equal_area_resampling_is_bounded) {
-  // A 512x512 equal-area map (3 MiB) resamples to 1024x512 (6 MiB): with an
-  // 8 MiB budget the map loads but its resampling is refused before it is
-  // allocated; with 16 MiB both fit.
-  auto dir   = temp_dir{};
-  auto image = texture_data{512, 512, std::vector<vec3f>(512 * 512, {0.5f, 0.5f, 0.5f})};
+  // A grey 512x512 equal-area map (a 1 MiB PFM, 5 MiB to load, 3 MiB kept)
+  // resamples to 1024x512 RGB (6 MiB): with an 8 MiB budget the map loads
+  // but its resampling is refused before it is allocated; with 16 MiB both
+  // fit.
+  auto dir  = temp_dir{};
+  auto grey = std::string{"Pf\n512 512\n-1.0\n"};
+  for (auto i = 0; i < 512 * 512; i++) {
+    auto value = 0.5f;
+    grey.append((const char*)&value, sizeof(value));
+  }
+  write_text(dir / "sky.pfm", grey);
   auto error = std::string{};
-  ASSERT_TRUE(save_image(dir / "sky.exr", image, error)) << error;
-  auto text = std::string{
-      "WorldBegin\nLightSource \"infinite\" \"string filename\" \"sky.exr\"\n"};
+  auto text  = std::string{
+      "WorldBegin\nLightSource \"infinite\" \"string filename\" \"sky.pfm\"\n"};
   {
     auto limit = memory_limit_scope{8 * mebibyte};
     expect_error(dir, text,
         {"scene.pbrt:2:", "LightSource \"infinite\"",
-            "the scene with the equal-area map \"sky.exr\" resampled to equirectangular needs",
+            "the scene with the equal-area map \"sky.pfm\" resampled to equirectangular needs",
             "memory limit of 8 MiB"});
   }
   auto limit = memory_limit_scope{16 * mebibyte};
@@ -1240,4 +1245,35 @@ TEST(pbrtio, bad_hair_files) {
   EXPECT_FALSE(save_hair_model(dir / "empty.hair", shape_data{}, error));
   EXPECT_FALSE(fs::exists(dir / "empty.hair"));
   EXPECT_EQ(std::distance(fs::directory_iterator(dir.path), fs::directory_iterator{}), 7);
+}
+
+TEST(pbrtio, hair_header_counts_devices_and_memory_are_checked_first) {
+  auto dir   = temp_dir{};
+  auto shape = shape_data{};
+  auto error = std::string{};
+  auto positions = std::vector<float>{0, 0, 0, 1, 0, 0, 2, 0, 0};
+  // Four billion strands of no points and no segments array: refused by the
+  // header's counts before any loop over the strands.
+  write_hair(dir / "strands.hair", 4000000000u, 0, 2, 0, {}, {});
+  EXPECT_FALSE(load_hair_model(dir / "strands.hair", shape, error));
+  EXPECT_TRUE(contains(error, "strands.hair") && contains(error, "4000000000 strands") &&
+              contains(error, "0 points"))
+      << error;
+  // A device or a fifo named as a model is refused, not read forever.
+  fs::create_symlink("/dev/zero", dir / "zero.hair");
+  EXPECT_FALSE(load_hair_model(dir / "zero.hair", shape, error));
+  EXPECT_TRUE(contains(error, "zero.hair") && contains(error, "not a regular file")) << error;
+  ASSERT_EQ(mkfifo((dir / "fifo.hair").c_str(), 0600), 0);
+  EXPECT_FALSE(load_hair_model(dir / "fifo.hair", shape, error));
+  EXPECT_TRUE(contains(error, "fifo.hair") && contains(error, "not a regular file")) << error;
+  // The points against the memory limit.
+  write_hair(dir / "model.hair", 1, 3, 2, 2, {}, positions);
+  auto limit        = load_memory_limit;
+  load_memory_limit = 100;
+  auto loaded       = load_hair_model(dir / "model.hair", shape, error);
+  load_memory_limit = limit;
+  EXPECT_FALSE(loaded);
+  EXPECT_TRUE(contains(error, "model.hair: ") && contains(error, "over the memory limit"))
+      << error;
+  EXPECT_TRUE(load_hair_model(dir / "model.hair", shape, error)) << error;
 }

@@ -7,6 +7,7 @@
 #include <gtest/gtest.h>
 
 #include <OpenImageIO/imageio.h>
+#include <sys/stat.h>
 
 #include "test_sceneio.h"
 
@@ -176,6 +177,56 @@ static void paths_and_temporary_names() {
   EXPECT_FALSE(load_text(dir.path, text, error));
   EXPECT_FALSE(save_text(dir.file("no/dir/a.txt"), "x", error));
   EXPECT_EQ(list_files(dir.path), (std::vector<std::string>{"a.txt"}));
+}
+
+// Tiny files whose headers claim huge images are refused before a pixel is
+// allocated: by what the file can hold (PNM, PFM, PNG) or by the memory
+// limit (anything). Devices and fifos are refused before the image library
+// opens them (it would read /dev/zero forever, wait on a fifo).
+TEST(image, header_bombs_devices_and_fifos_are_refused_before_reading) {
+  auto dir   = scratch_directory("image-bombs");
+  auto error = std::string{};
+  auto image = texture_data{};
+  write_file(dir.file("big.pgm"), "P5\n46000 46000\n255\n");
+  write_file(dir.file("big.pfm"), "PF\n46000 46000\n-1.0\n");
+  for (auto name : {"big.pgm", "big.pfm"}) {
+    EXPECT_FALSE(load_image(dir.file(name), image, error));
+    EXPECT_TRUE(contains(error, dir.file(name)) && contains(error, "46000x46000") &&
+                contains(error, "can hold"))
+        << error;
+  }
+  // A valid 2x2 PNG whose header is patched to claim 19000x19000 pixels.
+  write_8bit(dir.file("small.png"), 2, 2, 3, std::vector<uint8_t>(12, 100));
+  write_file(dir.file("big.png"), patch_png_size(read_file(dir.file("small.png")), 19000, 19000));
+  EXPECT_FALSE(load_image(dir.file("big.png"), image, error));
+  EXPECT_TRUE(contains(error, dir.file("big.png")) && contains(error, "19000x19000") &&
+              contains(error, "can hold"))
+      << error;
+  // Compressed formats are bounded by the memory limit.
+  ASSERT_TRUE(save_image(dir.file("small.exr"), make_image(64, 32, 1), error)) << error;
+  auto limit        = load_memory_limit;
+  load_memory_limit = 10000;
+  auto loaded       = load_image(dir.file("small.exr"), image, error);
+  load_memory_limit = limit;
+  EXPECT_FALSE(loaded);
+  EXPECT_TRUE(contains(error, dir.file("small.exr")) && contains(error, "64x32") &&
+              contains(error, "over the memory limit"))
+      << error;
+  EXPECT_TRUE(load_image(dir.file("small.exr"), image, error)) << error;
+  // Not regular files.
+  std::filesystem::create_symlink("/dev/zero", dir.file("zero.hdr"));
+  ASSERT_EQ(mkfifo(dir.file("fifo.png").c_str(), 0600), 0);
+  for (auto name : {"zero.hdr", "fifo.png"}) {
+    EXPECT_FALSE(load_image(dir.file(name), image, error));
+    EXPECT_TRUE(contains(error, dir.file(name)) && contains(error, "not a regular file"))
+        << error;
+    auto text = std::string{};
+    EXPECT_FALSE(load_text(dir.file(name), text, error));
+    EXPECT_TRUE(contains(error, dir.file(name)) && contains(error, "not a regular file"))
+        << error;
+  }
+  EXPECT_FALSE(load_image(dir.path, image, error));
+  EXPECT_TRUE(contains(error, "is a directory")) << error;
 }
 
 TEST(image, loads_the_real_pbrt_sky_pfm) {

@@ -547,6 +547,9 @@ static void rejects_bad_files_naming_file_and_place() {
       {"line 3, column 19", "malformed json"});
   expect_scene_error(dir, "{\"cameras\": [", {"line 1", "malformed json"});
   expect_scene_error(dir, "[1, 2]", {"expected a json object"});
+  // A number beyond double range: located as well, not nlohmann's bare message.
+  expect_scene_error(dir, "{\"cameras\": [\n  {\"lens\": -1e999}]}",
+      {"line 2, column 12", "number -1e999 is out of range"});
 }
 
 static void rejects_wrong_types_and_references() {
@@ -725,6 +728,60 @@ TEST(json, round_trips_the_42_layout) {
 TEST(json, loads_the_40_and_mixed_layouts) {
   loads_the_40_layout_and_round_trips_it();
   loads_the_mixed_layout_with_aliases_and_warns_about_extra_keys();
+}
+
+// A PLY named by 20000 shape elements (some by other paths to the same
+// file) is loaded once, as one shape that every instance uses; textures
+// likewise. Distinct files are checked in sum against the memory limit.
+TEST(json, each_file_loads_once_and_the_sum_fits_the_memory_limit) {
+  auto dir   = scratch_directory("json-same-files");
+  auto error = std::string{};
+  std::filesystem::create_directories(dir.file("shapes"));
+  ASSERT_TRUE(save_shape(dir.file("shapes/quad.ply"), make_quad(), error)) << error;
+  ASSERT_TRUE(save_image(dir.file("sky.exr"), make_texture(4, 2, 1), error)) << error;
+  std::filesystem::create_symlink("shapes/quad.ply", dir.file("link.ply"));
+  auto uris = std::vector<std::string>{"shapes/quad.ply", "./shapes/quad.ply",
+      "shapes/../shapes/quad.ply", "link.ply", dir.file("shapes/quad.ply")};
+  auto shapes = std::string{}, instances = std::string{};
+  for (auto i = 0; i < 20000; i++) {
+    shapes += std::string(i ? ", " : "") + R"({"uri": ")" + uris[i % uris.size()] + "\"}";
+    instances += std::string(i ? ", " : "") + R"({"shape": )" + std::to_string(i) +
+                 R"(, "material": )" + std::to_string(i % 2) + "}";
+  }
+  write_file(dir.file("scene.json"),
+      R"({"textures": [{"uri": "sky.exr"}, {"uri": "./sky.exr"}],
+          "materials": [{"color_tex": 1}, {"emission": [1, 1, 1], "emission_tex": 0}],
+          "environments": [{"emission": [1, 1, 1], "emission_tex": 1}],
+          "shapes": [)" + shapes + R"(], "instances": [)" + instances + "]}");
+  auto scene = scene_data{};
+  ASSERT_TRUE(load_scene(dir.file("scene.json"), scene, error)) << error;
+  EXPECT_EQ(scene.shapes.size(), 1u);
+  EXPECT_EQ(scene.shape_names.size(), 1u);
+  EXPECT_EQ(scene.instances.size(), 20000u);
+  auto all_first = true;
+  for (auto& instance : scene.instances) all_first = all_first && instance.shape == 0;
+  EXPECT_TRUE(all_first);
+  expect_same_shape(scene.shapes[0], make_quad());
+  EXPECT_EQ(scene.textures.size(), 1u);
+  EXPECT_EQ(scene.materials[0].color_tex, 0);
+  EXPECT_EQ(scene.materials[1].emission_tex, 0);
+  EXPECT_EQ(scene.environments[0].emission_tex, 0);
+
+  // Distinct files, each within the limit, in sum over it.
+  auto sphere = make_sphere_shape(32, 1);
+  for (auto name : {"a", "b", "c"})
+    ASSERT_TRUE(save_shape(dir.file(std::string("shapes/") + name + ".ply"), sphere, error));
+  write_file(dir.file("three.json"), R"({"shapes": [{"name": "a", "uri": "shapes/a.ply"},
+      {"name": "b", "uri": "shapes/b.ply"}, {"name": "c", "uri": "shapes/c.ply"}]})");
+  auto bytes = sphere.positions.size() * (12 + 12 + 8) + sphere.triangles.size() * 12;
+  auto limit = load_memory_limit;
+  load_memory_limit = 2.5 * bytes;
+  auto loaded       = load_scene(dir.file("three.json"), scene, error);
+  load_memory_limit = limit;
+  EXPECT_FALSE(loaded);
+  EXPECT_TRUE(contains(error, dir.file("three.json") + ": loading the shapes up to shape \"c\"") &&
+              contains(error, "over the memory limit"))
+      << error;
 }
 
 TEST(json, rejects_bad_input_naming_file_and_place) {

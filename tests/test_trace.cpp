@@ -163,6 +163,19 @@ static scene_data make_hair_test_scene() {
   return scene;
 }
 
+// A camera that validation would refuse, rendered anyway: its rays never
+// reach Embree (which would abort); the samples are dropped and counted.
+TEST(trace, untraceable_camera_rays_are_dropped_not_aborted) {
+  auto scene = make_furnace_scene();
+  scene.cameras[0].frame.o = {1e19f, 0, 4};
+  auto params       = trace_params{};
+  params.resolution = 8;
+  params.samples    = 1;
+  auto render       = render_scene(scene, params);
+  EXPECT_EQ(render.nonfinite, (int64_t)render.image.pixels.size());
+  EXPECT_EQ(render.rays, 0);
+}
+
 TEST(trace, same_image_bit_for_bit_with_one_and_two_threads) {
   auto params       = trace_params{};
   params.resolution = 32;

@@ -7,6 +7,7 @@
 #include <embree3/rtcore.h>
 
 #include <chrono>
+#include <cmath>
 #include <mutex>
 
 // -----------------------------------------------------------------------------
@@ -308,6 +309,16 @@ bool make_scene_bvh(scene_bvh& bvh, const scene_data& scene, const bvh_params& p
   return true;
 }
 
+bool is_traceable_ray(const ray3f& ray) {
+  // Embree's FLT_LARGE; comparisons are false for NaN.
+  const auto limit = 1.844e18f;
+  auto in_range    = [&](const vec3f& v) {
+    return std::abs(v.x) <= limit && std::abs(v.y) <= limit && std::abs(v.z) <= limit;
+  };
+  return in_range(ray.o) && in_range(ray.d) && ray.d != vec3f{0, 0, 0} &&
+         !std::isnan(ray.tmin) && !std::isnan(ray.tmax);
+}
+
 static void init_embree_ray(RTCRay& r, const ray3f& ray) {
   r.org_x = ray.o.x;
   r.org_y = ray.o.y;
@@ -324,6 +335,7 @@ static void init_embree_ray(RTCRay& r, const ray3f& ray) {
 }
 
 scene_intersection intersect_scene_bvh(const scene_bvh& bvh, const ray3f& ray) {
+  if (!is_traceable_ray(ray)) return {};
   auto context = RTCIntersectContext{};
   rtcInitIntersectContext(&context);
   auto rayhit = RTCRayHit{};
@@ -354,6 +366,7 @@ scene_intersection intersect_scene_bvh(const scene_bvh& bvh, const ray3f& ray) {
 }
 
 bool intersect_scene_bvh_any(const scene_bvh& bvh, const ray3f& ray) {
+  if (!is_traceable_ray(ray)) return true;
   auto context = RTCIntersectContext{};
   rtcInitIntersectContext(&context);
   auto r = RTCRay{};

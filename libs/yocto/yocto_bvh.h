@@ -76,6 +76,13 @@ struct scene_intersection {
 bool make_scene_bvh(scene_bvh& bvh, const scene_data& scene, const bvh_params& params,
     std::string& error);
 
+// Can Embree trace the ray? Origin and direction components within Embree's
+// range (it asserts beyond 1.844e18), a non-zero direction, tmin and tmax not
+// NaN. The queries below treat any other ray as a miss (as occluded for
+// shadow rays): validate_scene keeps scenes in range, this keeps a ray made
+// non-finite by round-off from aborting the program.
+bool is_traceable_ray(const ray3f& ray);
+
 // Closest hit along the ray within [tmin, tmax].
 scene_intersection intersect_scene_bvh(const scene_bvh& bvh, const ray3f& ray);
 // Is anything hit within [tmin, tmax]? (shadow rays)

@@ -2213,7 +2213,9 @@ enum hair_flags : uint32_t {
 
 static bool load_hair_model(const std::string& filename, shape_data& shape,
     std::string& error, vec3f* color, bool* has_color_array) {
-  shape     = {};
+  shape          = {};
+  auto file_size = (size_t)0;
+  if (!check_input_file(filename, file_size, error)) return false;
   auto data = std::string{};
   if (!read_whole_file(filename, data, error)) return false;
   auto header = hair_header{};
@@ -2250,6 +2252,22 @@ static bool load_hair_model(const std::string& filename, shape_data& shape,
     error = filename + ": too many points (" + std::to_string(points) + ") at byte 8";
     return false;
   }
+  // Every strand has a point, so the points (bounded by the file's size
+  // above) bound the strands before any loop over them.
+  if (strands > points) {
+    error = filename + ": the header claims " + std::to_string(strands) +
+            " strands (byte 4) for " + std::to_string(points) +
+            " points (byte 8); every strand has at least one point";
+    return false;
+  }
+  // The points read, then the spline through them: up to three control
+  // points with a radius and a curve per point.
+  auto needed = (double)points * (sizeof(vec3f) + sizeof(float)) +
+                3.0 * (double)points * (sizeof(vec3f) + sizeof(float)) +
+                (double)points * sizeof(vec4i);
+  if (!check_load_memory(
+          filename, "the spline through " + std::to_string(points) + " points", needed, error))
+    return false;
   auto bytes = (const unsigned char*)data.data();
   auto read_float = [&](uint64_t offset) {
     auto value = 0.0f;

@@ -5,6 +5,7 @@
 #include "yocto_scene.h"
 
 #include <cmath>
+#include <cstdio>
 
 // -----------------------------------------------------------------------------
 // CAMERAS
@@ -189,11 +190,114 @@ static bool check_frame(const frame3f& frame, const std::string& name, std::stri
   return true;
 }
 
+static std::string format_number(double value) {
+  char buffer[32];
+  std::snprintf(buffer, sizeof(buffer), "%g", value);
+  return buffer;
+}
+
+// The component of largest magnitude (NaN if any is NaN), for messages.
+static float largest_component(const vec3f& v) {
+  auto largest = v.x;
+  for (auto c : {v.y, v.z})
+    if (std::isnan(c) || std::abs(c) > std::abs(largest)) largest = c;
+  return largest;
+}
+
+static bool in_scene_range(const vec3f& p) {
+  return std::abs(p.x) <= max_scene_coordinate && std::abs(p.y) <= max_scene_coordinate &&
+         std::abs(p.z) <= max_scene_coordinate;  // false for NaN
+}
+
+static std::string outside_range() {
+  return "outside the range the ray tracer accepts (|coordinate| <= " +
+         format_number(max_scene_coordinate) + ")";
+}
+
+// Cameras: parameters each finite can still overflow together (a huge film
+// over a tiny lens, a huge focus or aperture), so the rays themselves are
+// checked where eval_camera's origins and directions are extreme: the corner,
+// edge and centre pixels, through the centre and the rim of the lens.
+static bool check_camera(const camera_data& camera, const std::string& name, std::string& error) {
+  auto parameters = {std::pair{"lens", camera.lens}, std::pair{"film", camera.film},
+      std::pair{"aspect", camera.aspect}, std::pair{"focus", camera.focus}};
+  for (auto [what, value] : parameters) {
+    if (!(std::isfinite(value) && value > 0)) {
+      error = name + ": " + what + " " + format_number(value) + " is not positive and finite";
+      return false;
+    }
+  }
+  if (!(std::isfinite(camera.aperture) && camera.aperture >= 0)) {
+    error = name + ": aperture " + format_number(camera.aperture) +
+            " is not zero or positive and finite";
+    return false;
+  }
+  if (!in_scene_range(camera.frame.o)) {
+    error = name + ": position " + format_number(largest_component(camera.frame.o)) +
+            " is " + outside_range();
+    return false;
+  }
+  auto rays_error = [&](const std::string& problem) {
+    error = name + ": lens " + format_number(camera.lens) + ", film " +
+            format_number(camera.film) + ", aspect " + format_number(camera.aspect) +
+            ", focus " + format_number(camera.focus) + " and aperture " +
+            format_number(camera.aperture) + " give rays the ray tracer cannot trace: " +
+            problem;
+    return false;
+  };
+  for (auto u : {0.0f, 0.5f, 1.0f}) {
+    for (auto v : {0.0f, 0.5f, 1.0f}) {
+      for (auto lens_uv : {vec2f{0, 0}, vec2f{1, 0}, vec2f{1, 0.25f}, vec2f{1, 0.5f},
+               vec2f{1, 0.75f}}) {
+        auto ray = eval_camera(camera, {u, v}, lens_uv);
+        if (!in_scene_range(ray.o))
+          return rays_error("an origin at " + format_number(largest_component(ray.o)) +
+                            ", " + outside_range());
+        if (!isfinite(ray.d) || std::abs(length(ray.d) - 1) > 1e-3f)
+          return rays_error("a direction that is not a finite unit vector");
+      }
+    }
+  }
+  return true;
+}
+
+// Vertex positions and radii: Embree takes them as they are.
+static bool check_shape_range(const shape_data& shape, const std::string& name,
+    std::string& error) {
+  for (auto i = 0; i < (int)shape.positions.size(); i++) {
+    if (!in_scene_range(shape.positions[i])) {
+      error = name + ": vertex " + std::to_string(i) + ": position " +
+              format_number(largest_component(shape.positions[i])) + " is " +
+              outside_range();
+      return false;
+    }
+  }
+  for (auto i = 0; i < (int)shape.radius.size(); i++) {
+    if (!(shape.radius[i] >= 0 && shape.radius[i] <= max_scene_coordinate)) {
+      error = name + ": vertex " + std::to_string(i) + ": radius " +
+              format_number(shape.radius[i]) + " is negative or outside the range the " +
+              "ray tracer accepts (<= " + format_number(max_scene_coordinate) + ")";
+      return false;
+    }
+  }
+  return true;
+}
+
 bool validate_scene(const scene_data& scene, std::string& error) {
   auto num_textures = (int)scene.textures.size();
   for (auto i = 0; i < (int)scene.cameras.size(); i++) {
-    if (!check_frame(scene.cameras[i].frame, element_name(scene.camera_names, i, "camera"), error))
+    auto name = element_name(scene.camera_names, i, "camera");
+    if (!check_frame(scene.cameras[i].frame, name, error)) return false;
+    if (!check_camera(scene.cameras[i], name, error)) return false;
+  }
+  for (auto i = 0; i < (int)scene.distant_lights.size(); i++) {
+    auto direction = scene.distant_lights[i].direction;
+    if (!(std::abs(length(normalize(direction)) - 1) <= 1e-3f)) {  // false for NaN
+      error = "distant light " + std::to_string(i) + ": direction [" +
+              format_number(direction.x) + " " + format_number(direction.y) + " " +
+              format_number(direction.z) + "] does not normalize to a unit vector";
       return false;
+    }
   }
   for (auto i = 0; i < (int)scene.shapes.size(); i++) {
     auto& shape = scene.shapes[i];
@@ -219,6 +323,7 @@ bool validate_scene(const scene_data& scene, std::string& error) {
     if (!check_elements(shape.triangles, nverts, name, "triangle", error)) return false;
     if (!check_elements(shape.lines, nverts, name, "line", error)) return false;
     if (!check_elements(shape.curves, nverts, name, "curve", error)) return false;
+    if (!check_shape_range(shape, name, error)) return false;
   }
   for (auto i = 0; i < (int)scene.materials.size(); i++) {
     auto& material = scene.materials[i];
@@ -241,6 +346,10 @@ bool validate_scene(const scene_data& scene, std::string& error) {
       return false;
     }
   }
+  // Shape bounds once, for instances that share shapes.
+  auto shape_bounds = std::vector<bbox3f>{};
+  if (!scene.instances.empty())
+    for (auto& shape : scene.shapes) shape_bounds.push_back(compute_bounds(shape));
   for (auto i = 0; i < (int)scene.instances.size(); i++) {
     auto& instance = scene.instances[i];
     auto  name     = element_name(scene.instance_names, i, "instance");
@@ -248,6 +357,19 @@ bool validate_scene(const scene_data& scene, std::string& error) {
     if (instance.shape < 0 || instance.shape >= (int)scene.shapes.size()) {
       error = name + ": shape reference " + std::to_string(instance.shape) + " out of range";
       return false;
+    }
+    // The placed shape must stay in range too (a large scale or offset).
+    auto& bounds = shape_bounds[instance.shape];
+    for (auto c = 0; c < 8 && !empty(bounds); c++) {
+      auto corner = transform_point(instance.frame,
+          {(c & 1) ? bounds.max.x : bounds.min.x, (c & 2) ? bounds.max.y : bounds.min.y,
+              (c & 4) ? bounds.max.z : bounds.min.z});
+      if (!in_scene_range(corner)) {
+        error = name + ": its frame places " +
+                element_name(scene.shape_names, instance.shape, "shape") + " at " +
+                format_number(largest_component(corner)) + ", " + outside_range();
+        return false;
+      }
     }
     if (instance.material < 0 || instance.material >= (int)scene.materials.size()) {
       error = name + ": material reference " + std::to_string(instance.material) +

@@ -223,8 +223,19 @@ shape_data make_quad_shape(const vec2f& size);
 void append_catmull_rom_strand(shape_data& shape, const std::vector<vec3f>& points,
     const std::vector<float>& radii);
 
-// Checks references, sizes and frames (finite, invertible); returns false
-// with a message naming the element.
+// The largest coordinate a scene may hold, in world space. Embree asserts on
+// a ray whose origin or direction has a component beyond 1.844e18 (its
+// FLT_LARGE) and drops primitives whose bounds pass it; 1e15 leaves a factor
+// of a thousand for the arithmetic of hit points and ray offsets, and is far
+// beyond any real scene (floats at 1e15 are 1.3e8 apart).
+inline constexpr float max_scene_coordinate = 1e15f;
+
+// Checks references, sizes and frames (finite, invertible), and what reaches
+// the ray tracer: camera rays (corner, edge and centre pixels through the
+// centre and rim of the lens) must start within max_scene_coordinate along a
+// finite unit direction; vertex positions, radii and instanced bounds must lie
+// within it; distant light directions must normalize. Returns false with a
+// message naming the element.
 bool validate_scene(const scene_data& scene, std::string& error);
 
 // Adds a default camera framing the scene bounds if the scene has none.

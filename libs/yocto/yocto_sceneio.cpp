@@ -362,41 +362,79 @@ bool check_load_memory(const std::string& filename, const std::string& what,
   return false;
 }
 
-// Reads a whole file in one go: PLY files with millions of curves are parsed
-// from memory, never value by value through a stream.
-static bool load_binary(const std::string& filename, std::string& data, std::string& error) {
-  auto ec = std::error_code{};
-  if (std::filesystem::is_directory(filename, ec)) {
-    error = filename + ": is a directory, not a file";
-    return false;
+// The message for a file that is not a regular one; the size if it is.
+static bool check_file_type(const std::string& filename, const struct stat& info,
+    size_t& size, std::string& error) {
+  if (S_ISREG(info.st_mode)) {
+    size = (size_t)info.st_size;
+    return true;
   }
-  auto file = std::fopen(filename.c_str(), "rb");
-  if (!file) {
+  if (S_ISDIR(info.st_mode)) error = filename + ": is a directory, not a file";
+  else error = filename + ": is a device, fifo or socket, not a regular file";
+  return false;
+}
+
+bool check_input_file(const std::string& filename, size_t& size, std::string& error) {
+  auto info = (struct stat){};
+  if (::stat(filename.c_str(), &info) != 0) {
     error = filename + ": cannot open file (" + std::strerror(errno) + ")";
     return false;
   }
-  // Read straight into the string when the size is known; then read on in
-  // chunks, for files whose size the system does not tell.
+  return check_file_type(filename, info, size, error);
+}
+
+// Reads a whole file in one go: PLY files with millions of curves are parsed
+// from memory, never value by value through a stream. The file is opened
+// without blocking (a fifo would wait for a writer) and checked once open,
+// so that what is read is what was checked.
+static bool load_binary(const std::string& filename, std::string& data, std::string& error) {
   data.clear();
-  if (std::fseek(file, 0, SEEK_END) == 0) {
-    auto size = std::ftell(file);
-    std::fseek(file, 0, SEEK_SET);
-    if (size > 0) {
-      data.resize((size_t)size);
-      data.resize(std::fread(data.data(), 1, (size_t)size, file));
-    }
-  }
-  char buffer[1 << 16];
-  while (!std::feof(file) && !std::ferror(file)) {
-    auto count = std::fread(buffer, 1, sizeof(buffer), file);
-    data.append(buffer, count);
-  }
-  auto failed = std::ferror(file) != 0;
-  std::fclose(file);
-  if (failed) {
-    error = filename + ": cannot read file";
+  auto fd = ::open(filename.c_str(), O_RDONLY | O_NONBLOCK | O_CLOEXEC);
+  if (fd < 0) {
+    error = filename + ": cannot open file (" + std::strerror(errno) + ")";
     return false;
   }
+  auto fail = [&]() {
+    ::close(fd);
+    data.clear();
+    return false;
+  };
+  auto read_error = [&]() {
+    error = filename + ": cannot read file (" + std::strerror(errno) + ")";
+    return fail();
+  };
+  auto info = (struct stat){};
+  auto size = (size_t)0;
+  if (::fstat(fd, &info) != 0) return read_error();
+  if (!check_file_type(filename, info, size, error) ||
+      !check_load_memory(filename, "reading the file", (double)size, error))
+    return fail();
+  auto read_some = [&](char* buffer, size_t count) {
+    auto result = ::read(fd, buffer, count);
+    while (result < 0 && errno == EINTR) result = ::read(fd, buffer, count);
+    return result;
+  };
+  // The size first, then on in chunks for files whose size the system does
+  // not tell (those in /proc say 0), within the memory limit.
+  data.resize(size);
+  auto done = (size_t)0;
+  while (done < size) {
+    auto count = read_some(data.data() + done, size - done);
+    if (count < 0) return read_error();
+    if (count == 0) break;
+    done += (size_t)count;
+  }
+  data.resize(done);
+  char buffer[1 << 16];
+  while (true) {
+    auto count = read_some(buffer, sizeof(buffer));
+    if (count < 0) return read_error();
+    if (count == 0) break;
+    if (!check_load_memory(filename, "reading the file", (double)(data.size() + count), error))
+      return fail();
+    data.append(buffer, (size_t)count);
+  }
+  ::close(fd);
   return true;
 }
 
@@ -1083,8 +1121,48 @@ bool is_image_filename(const std::string& filename) {
   return is_linear_extension(extension) || is_8bit_extension(extension);
 }
 
+// Refuses an image whose header claims more pixels than the file can hold or
+// than the memory limit allows, before a pixel is allocated. Uncompressed
+// formats (PFM, PNM) store every value; PNG's deflate stream inflates at
+// most 1032 times (a 258-byte match coded in two bits) into rows of at
+// least one filter byte and one bit a pixel. Other formats (EXR, JPEG,
+// HDR's run lengths) compress too well to bound: the memory limit alone.
+static bool check_image_size(const std::string& filename, const OIIO::ImageSpec& spec,
+    const std::string& format, size_t file_size, std::string& error) {
+  auto width = (double)spec.width, height = (double)spec.height;
+  auto channels = (double)spec.nchannels;
+  auto size     = std::to_string(spec.width) + "x" + std::to_string(spec.height);
+  auto min_bytes = 0.0;
+  if (format == "pnm") {
+    // PFM is floats; PNM is binary at its bit depth, or ascii with at least
+    // one character a value.
+    auto bits = (double)spec.get_int_attribute("oiio:BitsPerSample", 8 * (int)spec.format.size());
+    if (spec.get_int_attribute("pnm:binary", 1) != 0)
+      min_bytes = height * std::ceil(width * channels * bits / 8);
+    else min_bytes = height * width * channels;
+  } else if (format == "png") {
+    min_bytes = height * (1 + std::ceil(width / 8)) / 1032;
+  }
+  if (min_bytes > (double)file_size) {
+    error = filename + ": the header claims " + size + " pixels, more than the file's " +
+            std::to_string(file_size) + " bytes can hold";
+    return false;
+  }
+  // What load_image allocates: the decoder's buffer, the float values read
+  // and the RGB pixels kept.
+  auto pixels = width * height;
+  auto bytes  = pixels * channels * (spec.format.size() + sizeof(float)) +
+               pixels * sizeof(vec3f);
+  auto what = "a " + size + " image with " + std::to_string(spec.nchannels) +
+              (spec.nchannels == 1 ? " channel" : " channels");
+  return check_load_memory(filename, what, bytes, error);
+}
+
 bool load_image(const std::string& filename, texture_data& image, std::string& error) {
   image = {};
+  // OpenImageIO opens the file itself: a device or fifo would never end.
+  auto file_size = (size_t)0;
+  if (!check_input_file(filename, file_size, error)) return false;
   // Colours as stored: OpenImageIO would otherwise premultiply them by an
   // alpha that we drop.
   auto config = OIIO::ImageSpec{};
@@ -1101,7 +1179,13 @@ bool load_image(const std::string& filename, texture_data& image, std::string& e
     error = filename + ": image has no pixels";
     return false;
   }
-  // Guard the size computation against absurd headers.
+  if (spec.depth > 1) {
+    error = filename + ": a volume image (depth " + std::to_string(spec.depth) +
+            "), not a picture";
+    return false;
+  }
+  if (!check_image_size(filename, spec, input->format_name(), file_size, error)) return false;
+  // Environment sampling indexes pixels with int: guard the count.
   auto num_pixels = (size_t)spec.width * (size_t)spec.height;
   if (num_pixels > ((size_t)1 << 31) / (size_t)channels) {
     error = filename + ": image too large (" + std::to_string(spec.width) + "x" +
@@ -1722,6 +1806,45 @@ static material_type infer_material_type(const scene_data& scene, int material,
   return used && fibers_only ? material_type::hair : material_type::matte;
 }
 
+// Elements that name the same file (the path resolved) merge into the first
+// of them: returns each element's new index, and keeps one entry per file in
+// `elements` and in the parallel arrays, the first of which holds the paths.
+template <typename T>
+static std::vector<int> merge_same_files(
+    std::vector<T>& elements, const std::vector<std::vector<std::string>*>& arrays) {
+  auto& paths = *arrays.front();
+  auto  first = std::unordered_map<std::string, int>{};
+  auto  index = std::vector<int>(elements.size());
+  auto  kept  = 0;
+  for (auto i = 0; i < (int)elements.size(); i++) {
+    auto ec  = std::error_code{};
+    auto key = std::filesystem::weakly_canonical(paths[i], ec).string();
+    if (ec) key = paths[i];
+    auto [found, added] = first.try_emplace(key, kept);
+    index[i]            = found->second;
+    if (!added) continue;
+    if (kept != i) {
+      elements[kept] = std::move(elements[i]);
+      for (auto array : arrays) (*array)[kept] = std::move((*array)[i]);
+    }
+    kept++;
+  }
+  elements.resize(kept);
+  for (auto array : arrays) array->resize(kept);
+  return index;
+}
+
+// Memory a loaded shape holds.
+static double shape_bytes(const shape_data& shape) {
+  return (double)shape.triangles.size() * sizeof(vec3i) +
+         (double)shape.lines.size() * sizeof(vec2i) +
+         (double)shape.curves.size() * sizeof(vec4i) +
+         (double)shape.positions.size() * sizeof(vec3f) +
+         (double)shape.normals.size() * sizeof(vec3f) +
+         (double)shape.texcoords.size() * sizeof(vec2f) +
+         (double)shape.radius.size() * sizeof(float);
+}
+
 // Line and column of a byte offset, for json syntax errors.
 static std::string text_position(const std::string& text, size_t byte) {
   auto line = 1, column = 1;
@@ -1732,20 +1855,55 @@ static std::string text_position(const std::string& text, size_t byte) {
   return "line " + std::to_string(line) + ", column " + std::to_string(column);
 }
 
+// nlohmann's SAX events, ignored but for the error: its position is what
+// the DOM parser's exception lacks for a number out of double range.
+struct json_error_locator {
+  size_t      position = 0;
+  std::string token    = "";
+  bool null() { return true; }
+  bool boolean(bool) { return true; }
+  bool number_integer(json::number_integer_t) { return true; }
+  bool number_unsigned(json::number_unsigned_t) { return true; }
+  bool number_float(json::number_float_t, const std::string&) { return true; }
+  bool string(std::string&) { return true; }
+  bool binary(json::binary_t&) { return true; }
+  bool start_object(size_t) { return true; }
+  bool key(std::string&) { return true; }
+  bool end_object() { return true; }
+  bool start_array(size_t) { return true; }
+  bool end_array() { return true; }
+  bool parse_error(size_t byte, const std::string& last_token, const json::exception&) {
+    position = byte;
+    token    = last_token;
+    return false;
+  }
+};
+
 static bool load_scene_json(json_loader& loader, scene_data& scene) {
   auto text = std::string{};
   if (!load_text(loader.filename, text, loader.error)) return false;
   auto js = json{};
+  // nlohmann reports the byte just past the error.
+  auto place = [&](size_t byte) { return text_position(text, byte > 0 ? byte - 1 : 0); };
   try {
     js = json::parse(text);
   } catch (const json::parse_error& exception) {
-    // nlohmann reports the byte just past the error; drop its own prefix.
+    // Its message without its own prefix and position.
     auto message = std::string(exception.what());
     auto column  = message.find(", column ");
     auto colon   = message.find(": ", column == std::string::npos ? 0 : column);
     if (colon != std::string::npos) message = message.substr(colon + 2);
-    auto byte = exception.byte > 0 ? exception.byte - 1 : 0;
-    return json_fail(loader, text_position(text, byte) + ": malformed json: " + message);
+    return json_fail(loader, place(exception.byte) + ": malformed json: " + message);
+  } catch (const json::exception& exception) {
+    // A number beyond double range (1e999), located by parsing again: the
+    // place is where the number starts.
+    auto locator = json_error_locator{};
+    json::sax_parse(text, &locator);
+    if (exception.id != 406)
+      return json_fail(loader, place(locator.position) + ": " + exception.what());
+    auto start = locator.position - std::min(locator.position, locator.token.size());
+    return json_fail(loader, text_position(text, start) + ": number " + locator.token +
+                                 " is out of range");
   }
   if (!js.is_object())
     return json_fail(loader, "expected a json object at the top, got " + json_describe(js));
@@ -1870,22 +2028,56 @@ static bool load_scene_json(json_loader& loader, scene_data& scene) {
                               : std::string(kind) + " \"" + name + "\"";
     return user.empty() ? label : label + " (used by " + user + ")";
   };
+  auto shape_paths = std::vector<std::string>{}, shape_labels = std::vector<std::string>{};
   for (auto i = 0; i < (int)scene.shapes.size(); i++) {
-    auto label = element_label(
-        "shape", scene.shape_names[i], loader.shape_users[i], i);
-    auto error = std::string{};
-    if (!load_shape(path_join(loader.dirname, loader.shape_uris[i]), scene.shapes[i], error))
-      return json_fail(loader, label + ": " + error);
+    shape_paths.push_back(path_join(loader.dirname, loader.shape_uris[i]));
+    shape_labels.push_back(element_label("shape", scene.shape_names[i], loader.shape_users[i], i));
   }
+  auto texture_paths = std::vector<std::string>{}, texture_labels = std::vector<std::string>{};
   for (auto i = 0; i < (int)scene.textures.size(); i++) {
-    auto label = element_label(
-        "texture", scene.texture_names[i], loader.texture_users[i], i);
-    auto& uri = loader.texture_uris[i];
+    auto label = element_label("texture", scene.texture_names[i], loader.texture_users[i], i);
+    auto& uri  = loader.texture_uris[i];
     if (uri.empty() && !find_texture_file(loader, scene.texture_names[i], label, uri))
       return false;
+    texture_paths.push_back(path_join(loader.dirname, uri));
+    texture_labels.push_back(label);
+  }
+  // Each file is loaded once: elements naming the same file share one shape
+  // or texture (a PLY named by 20000 shapes is one shape, and one BVH that
+  // Embree instances), so memory is that of the distinct files.
+  auto shape_index = merge_same_files(
+      scene.shapes, {&shape_paths, &scene.shape_names, &shape_labels});
+  for (auto& instance : scene.instances) instance.shape = shape_index[instance.shape];
+  auto texture_index = merge_same_files(
+      scene.textures, {&texture_paths, &scene.texture_names, &texture_labels});
+  auto remap_texture = [&](int& texture) {
+    if (texture >= 0) texture = texture_index[texture];
+  };
+  for (auto& material : scene.materials) {
+    remap_texture(material.color_tex);
+    remap_texture(material.emission_tex);
+  }
+  for (auto& environment : scene.environments) remap_texture(environment.emission_tex);
+
+  // Files are checked one by one as they load; their sum is checked too.
+  auto total = 0.0;
+  for (auto i = 0; i < (int)scene.shapes.size(); i++) {
     auto error = std::string{};
-    if (!load_image(path_join(loader.dirname, uri), scene.textures[i], error))
-      return json_fail(loader, label + ": " + error);
+    if (!load_shape(shape_paths[i], scene.shapes[i], error))
+      return json_fail(loader, shape_labels[i] + ": " + error);
+    total += shape_bytes(scene.shapes[i]);
+    if (!check_load_memory(loader.filename,
+            "loading the shapes up to " + shape_labels[i], total, loader.error))
+      return false;
+  }
+  for (auto i = 0; i < (int)scene.textures.size(); i++) {
+    auto error = std::string{};
+    if (!load_image(texture_paths[i], scene.textures[i], error))
+      return json_fail(loader, texture_labels[i] + ": " + error);
+    total += scene.textures[i].pixels.size() * sizeof(vec3f);
+    if (!check_load_memory(loader.filename,
+            "loading the shapes and textures up to " + texture_labels[i], total, loader.error))
+      return false;
   }
 
   for (auto i = 0; i < (int)scene.materials.size(); i++) {

@@ -48,6 +48,10 @@ namespace yocto {
 // a warning (e.g. roughness on hair), so a loaded material holds defaults in
 // the fields its type ignores. Bad values, wrong types, out-of-range
 // references, missing files and hair on a triangle mesh are errors.
+// Each file is loaded once: shape (texture) elements that name the same file,
+// the path resolved, become one shape (texture) that their users share, named
+// after the first of them. The files' sizes and their sum are checked against
+// load_memory_limit.
 bool load_scene(const std::string& filename, scene_data& scene, std::string& error,
     std::vector<std::string>* warnings = nullptr);
 
@@ -104,6 +108,11 @@ bool is_image_filename(const std::string& filename);
 // FILE HELPERS
 // -----------------------------------------------------------------------------
 namespace yocto {
+
+// Checks that filename names a regular file and gives its size: a
+// directory, a device (/dev/zero reads forever) or a fifo (blocks) is refused
+// with a message naming it. Every loader checks its inputs with this first.
+bool check_input_file(const std::string& filename, size_t& size, std::string& error);
 
 // Writes a file through a temporary in the same directory, then renames.
 // The text is written byte for byte, so binary data works too.

@@ -561,6 +561,12 @@ bool check_trace_params(const scene_data& scene, const trace_params& params,
   return true;
 }
 
+double trace_image_bytes(const scene_data& scene, const trace_params& params) {
+  auto size = camera_resolution(scene.cameras[params.camera], params.resolution);
+  return (double)size.x * (double)size.y *
+         (sizeof(glm::dvec3) + sizeof(vec3f) + 3 * sizeof(uint8_t));
+}
+
 void init_trace_state(trace_state& state, const scene_data& scene, const trace_params& params) {
   auto size     = camera_resolution(scene.cameras[params.camera], params.resolution);
   state.width   = size.x;
@@ -608,6 +614,12 @@ static void trace_rows(trace_state& state, const scene_data& scene, const scene_
         auto luv      = sample_sequence2f(sequence, trace_pair_lens);
         auto uv       = vec2f{(i + puv.x) / state.width, (j + puv.y) / state.height};
         auto ray      = eval_camera(camera, uv, luv);
+        // validate_scene checked the camera; a ray that round-off still
+        // made untraceable counts as a dropped sample.
+        if (!is_traceable_ray(ray)) {
+          nonfinite++;
+          continue;
+        }
         auto radiance = trace_path(scene, bvh, context, ray, sequence, params, rays, record);
         if (!isfinite(radiance)) {
           nonfinite++;

@@ -109,6 +109,11 @@ struct trace_state {
 bool check_trace_params(const scene_data& scene, const trace_params& params,
     std::string& error);
 
+// Bytes of the image buffers a render allocates: the sums of trace_state, the
+// image get_image returns and the 8-bit copy a png or jpg save makes. Callers
+// check it against their memory budget before init_trace_state.
+double trace_image_bytes(const scene_data& scene, const trace_params& params);
+
 void init_trace_state(trace_state& state, const scene_data& scene, const trace_params& params);
 
 // Adds `count` samples to every pixel (samples state.samples ... + count - 1),
