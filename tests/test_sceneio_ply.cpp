@@ -165,6 +165,27 @@ static void triangulates_polygons_as_fans_and_reads_st_texcoords() {
   EXPECT_EQ(shape.texcoords.back(), (vec2f{0.5f, 2}));
 }
 
+// No vertices but every kind of vertex property: an empty shape. (The
+// columns' storage is then null; the clang-sanitized build caught null plus
+// an offset here.)
+static void reads_an_empty_vertex_element_with_properties() {
+  auto dir = scratch_directory("ply-empty");
+  for (auto format : {"ascii", "binary_little_endian", "binary_big_endian"}) {
+    auto filename = dir.file(std::string(format) + ".ply");
+    write_file(filename, std::string("ply\nformat ") + format +
+                             " 1.0\nelement vertex 0\nproperty float x\n"
+                             "property float y\nproperty float z\nproperty float nx\n"
+                             "property float ny\nproperty float nz\nproperty float u\n"
+                             "property float v\nproperty float radius\nelement face 0\n"
+                             "property list uchar int vertex_indices\nend_header\n");
+    auto shape = shape_data{};
+    auto error = std::string{};
+    ASSERT_TRUE(load_shape(filename, shape, error)) << error;
+    EXPECT_TRUE(shape.positions.empty() && shape.normals.empty() && shape.texcoords.empty() &&
+                shape.radius.empty() && shape.triangles.empty());
+  }
+}
+
 TEST(ply, loads_the_real_yocto_lines_file) {
   auto filename =
       std::string(YOCTO_SHARED_DIR) + "/data/yocto/yocto-gl-lines/thicklines-grid.ply";
@@ -327,6 +348,7 @@ TEST(ply, writes_and_reads_every_layout_type_and_format) {
   round_trips_triangles_lines_and_curves_in_binary_and_ascii();
   reads_every_property_type_in_every_format_and_skips_unknown_data();
   triangulates_polygons_as_fans_and_reads_st_texcoords();
+  reads_an_empty_vertex_element_with_properties();
 }
 
 TEST(ply, rejects_bad_input_naming_file_and_place) {

@@ -858,7 +858,9 @@ static bool load_ply_shape(
       auto in      = [](int c, ply_column first, ply_column last) {
         return c >= (int)first && c <= (int)last;
       };
-      for (size_t p = 0; p < columns.size(); p++) {
+      // Without rows the columns have no storage (data() may be null, and
+      // null plus an offset is undefined): no targets, nothing to write.
+      for (size_t p = 0; p < columns.size() && max_rows > 0; p++) {
         auto c = columns[p];
         if (in(c, ply_column::x, ply_column::z)) {
           targets[p] = (float*)shape.positions.data() + c, strides[p] = 3;
