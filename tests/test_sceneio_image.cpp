@@ -128,6 +128,18 @@ static void bad_inputs_fail_naming_the_file_and_leave_nothing() {
   auto dir   = scratch_directory("image-errors");
   auto image = make_image(4, 3, 1);
   auto error = std::string{};
+  // A PNG whose text chunk claims 1.8 GB (libpng allocated it inside
+  // OpenImageIO's open; found by fuzz_image): refused from its header.
+  ASSERT_TRUE(save_image(dir.file("chunk.png"), image, error)) << error;
+  auto png = read_file(dir.file("chunk.png"));
+  png.insert(33, std::string("\x70\x00\x00\x14tEXtComment\0hello", 24));
+  write_file(dir.file("chunk.png"), png);
+  auto chunk_bomb = texture_data{};
+  EXPECT_FALSE(load_image(dir.file("chunk.png"), chunk_bomb, error));
+  EXPECT_TRUE(contains(error, dir.file("chunk.png")) && contains(error, "tEXt") &&
+              contains(error, "more than the file holds"))
+      << error;
+  std::filesystem::remove(dir.file("chunk.png"));
   EXPECT_FALSE(save_image(dir.file("image.xyz"), image, error));
   EXPECT_TRUE(contains(error, dir.file("image.xyz")) && contains(error, ".xyz")) << error;
   EXPECT_FALSE(save_image(dir.file("noextension"), image, error));

@@ -1160,11 +1160,54 @@ static bool check_image_size(const std::string& filename, const OIIO::ImageSpec&
   return check_load_memory(filename, what, bytes, error);
 }
 
+// Four bytes of a chunk type, printable whatever they hold.
+static std::string printable_name(const unsigned char* bytes, int count) {
+  auto name = std::string{};
+  for (auto i = 0; i < count; i++)
+    name += std::isalnum(bytes[i]) ? (char)bytes[i] : '?';
+  return name;
+}
+
+// libpng allocates an ancillary chunk (iCCP, zTXt, ...) at the length its
+// header claims before reading it, inside OpenImageIO's open: a few hundred
+// bytes claiming 2 GB allocate 2 GB. Walks the chunk headers of a PNG (by
+// its signature, whatever the extension) and refuses a length past the end
+// of the file (PNG spec, section 5.3), before OpenImageIO sees the file.
+static bool check_png_chunks(const std::string& filename, std::string& error) {
+  auto file = std::fopen(filename.c_str(), "rb");
+  if (!file) return true;  // OpenImageIO reports it
+  unsigned char header[8];
+  auto is_png = std::fread(header, 1, 8, file) == 8 &&
+                std::memcmp(header, "\x89PNG\r\n\x1a\n", 8) == 0;
+  auto offset = (uint64_t)8, size = (uint64_t)0;
+  if (is_png && std::fseek(file, 0, SEEK_END) == 0) size = (uint64_t)std::ftell(file);
+  auto ok = true;
+  while (is_png && ok && offset + 8 <= size) {
+    unsigned char chunk[8];
+    if (std::fseek(file, (long)offset, SEEK_SET) != 0 || std::fread(chunk, 1, 8, file) != 8)
+      break;
+    auto length = (uint64_t)chunk[0] << 24 | (uint64_t)chunk[1] << 16 |
+                  (uint64_t)chunk[2] << 8 | (uint64_t)chunk[3];
+    // Length, type, data and CRC.
+    if (offset + 12 + length > size) {
+      error = filename + ": PNG chunk \"" + printable_name(chunk + 4, 4) + "\" at byte " +
+              std::to_string(offset) + " claims " + std::to_string(length) +
+              " bytes, more than the file holds";
+      ok = false;
+    }
+    if (std::memcmp(chunk + 4, "IEND", 4) == 0) break;
+    offset += 12 + length;
+  }
+  std::fclose(file);
+  return ok;
+}
+
 bool load_image(const std::string& filename, texture_data& image, std::string& error) {
   image = {};
   // OpenImageIO opens the file itself: a device or fifo would never end.
   auto file_size = (size_t)0;
   if (!check_input_file(filename, file_size, error)) return false;
+  if (!check_png_chunks(filename, error)) return false;
   // Colours as stored: OpenImageIO would otherwise premultiply them by an
   // alpha that we drop.
   auto config = OIIO::ImageSpec{};
