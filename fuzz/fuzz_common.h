@@ -8,8 +8,11 @@
 #define YOCTO_FUZZ_COMMON_H_
 
 #include <OpenImageIO/imageio.h>
+#include <signal.h>
+#include <unistd.h>
 #include <yocto/yocto_sceneio.h>
 
+#include <cerrno>
 #include <cstdint>
 #include <cstdio>
 #include <cstdlib>
@@ -29,12 +32,25 @@ inline constexpr double fuzz_memory_limit = 512.0 * (1 << 20);
   std::abort();
 }
 
-// Removes the scratch folder on a normal exit; a crash leaves it to
-// scripts/fuzz.sh, which gives each run its own TMPDIR.
+// Removes the scratch folder on a normal exit. A crash exits without
+// cleaning up: the next run removes the folders of processes that are gone
+// (scripts/fuzz.sh also gives each run its own TMPDIR).
 inline std::string scratch_path = "";
 inline void remove_scratch_folder() {
   auto ec = std::error_code{};
   if (!scratch_path.empty()) std::filesystem::remove_all(scratch_path, ec);
+}
+
+// Folders named yocto-fuzz-PID-* whose process no longer runs.
+inline void remove_stale_folders(const std::string& base) {
+  auto ec = std::error_code{};
+  for (auto& entry : std::filesystem::directory_iterator(base, ec)) {
+    auto name = entry.path().filename().string();
+    auto pid  = 0;
+    if (std::sscanf(name.c_str(), "yocto-fuzz-%d-", &pid) != 1 || pid <= 0) continue;
+    if (kill(pid, 0) == 0 || errno != ESRCH) continue;
+    std::filesystem::remove_all(entry.path(), ec);
+  }
 }
 
 // This process's folder for inputs: under $TMPDIR if set, else in /dev/shm
@@ -45,7 +61,8 @@ inline const std::string& scratch_folder() {
   if (auto tmpdir = std::getenv("TMPDIR"); tmpdir && *tmpdir) base = tmpdir;
   else if (std::filesystem::is_directory("/dev/shm")) base = "/dev/shm";
   else base = "/tmp";
-  auto pattern = base + "/yocto-fuzz-XXXXXX";
+  remove_stale_folders(base);
+  auto pattern = base + "/yocto-fuzz-" + std::to_string(getpid()) + "-XXXXXX";
   if (!mkdtemp(pattern.data())) fuzz_fail("cannot create a folder in " + base);
   scratch_path = pattern;
   std::atexit(remove_scratch_folder);
