@@ -76,10 +76,6 @@ inline void write_file(const std::string& filename, const void* data, size_t siz
   if (std::fclose(file) != 0 || written != size) fuzz_fail("cannot write " + filename);
 }
 
-inline void write_file(const std::string& filename, const std::string& text) {
-  write_file(filename, text.data(), text.size());
-}
-
 // Small valid files under FOLDER that fuzzed scenes name: the names the
 // generated scenes use (shapes/hair.ply, shapes/head.ply, sphere.ply and
 // ball.ply, textures/sky.exr), a lines shape, and a square sky (pbrt-v4

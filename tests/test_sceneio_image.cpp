@@ -162,6 +162,12 @@ static void bad_inputs_fail_naming_the_file_and_leave_nothing() {
   EXPECT_FALSE(load_image(dir.file("garbage.png"), loaded, error));
   EXPECT_TRUE(contains(error, dir.file("garbage.png"))) << error;
   EXPECT_TRUE(loaded.pixels.empty());
+  // A PNG cut inside its chunks: OpenImageIO 2.4 leaks on this path, which
+  // the sanitized build suppresses (scripts/lsan.supp), not our code.
+  ASSERT_TRUE(save_image(dir.file("whole.png"), image, error)) << error;
+  write_file(dir.file("cut.png"), read_file(dir.file("whole.png")).substr(0, 40));
+  EXPECT_FALSE(load_image(dir.file("cut.png"), loaded, error));
+  EXPECT_TRUE(contains(error, dir.file("cut.png"))) << error;
 
   EXPECT_TRUE(is_image_filename("a/b.EXR"));
   EXPECT_TRUE(is_image_filename("b.jpeg"));
