@@ -398,10 +398,7 @@ static int run_info(const std::string& filename) {
     lines += shape.lines.size();
     curves += shape.curves.size();
     vertices += shape.positions.size();
-    bytes += shape.triangles.size() * sizeof(vec3i) + shape.lines.size() * sizeof(vec2i) +
-             shape.curves.size() * sizeof(vec4i) + shape.positions.size() * sizeof(vec3f) +
-             shape.normals.size() * sizeof(vec3f) + shape.texcoords.size() * sizeof(vec2f) +
-             shape.radius.size() * sizeof(float);
+    bytes += (size_t)shape_memory(shape);
   }
   for (auto& texture : scene.textures) bytes += texture.pixels.size() * sizeof(vec3f);
   auto bounds = compute_bounds(scene);

@@ -7,13 +7,17 @@
 #define TESTS_RUN_YSCENE_H_
 
 #include <sys/wait.h>
+#include <unistd.h>
 
 #include <cstdio>
+#include <functional>
 #include <string>
+#include <vector>
 
 struct command_result {
-  int         status = -1;
+  int         status = -1;  // exit status, -1 if ended by a signal
   std::string output = "";  // stdout and stderr together
+  int         signal = 0;   // the signal that ended it, if any
 };
 
 inline command_result run_yscene(const std::string& arguments) {
@@ -25,6 +29,40 @@ inline command_result run_yscene(const std::string& arguments) {
   while (auto read = fread(buffer, 1, sizeof(buffer), pipe)) result.output.append(buffer, read);
   auto status   = pclose(pipe);
   result.status = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  return result;
+}
+
+// Runs yscene with the arguments (no shell) in a child process that first
+// calls `setup`: resource limits and signal dispositions set there are kept
+// across exec.
+inline command_result run_yscene_in_child(
+    const std::vector<std::string>& arguments, const std::function<void()>& setup) {
+  auto result = command_result{};
+  int  pipes[2];
+  if (pipe(pipes) != 0) return result;
+  auto child = fork();
+  if (child == 0) {
+    setup();
+    dup2(pipes[1], 1);
+    dup2(pipes[1], 2);
+    close(pipes[0]);
+    close(pipes[1]);
+    auto argv = std::vector<char*>{(char*)YSCENE_EXE};
+    for (auto& argument : arguments) argv.push_back((char*)argument.c_str());
+    argv.push_back(nullptr);
+    execv(YSCENE_EXE, argv.data());
+    _exit(127);
+  }
+  close(pipes[1]);
+  char buffer[4096];
+  for (auto count = read(pipes[0], buffer, sizeof(buffer)); count > 0;
+       count       = read(pipes[0], buffer, sizeof(buffer)))
+    result.output.append(buffer, (size_t)count);
+  close(pipes[0]);
+  auto status = 0;
+  waitpid(child, &status, 0);
+  if (WIFEXITED(status)) result.status = WEXITSTATUS(status);
+  if (WIFSIGNALED(status)) result.signal = WTERMSIG(status);
   return result;
 }
 

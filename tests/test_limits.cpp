@@ -18,6 +18,7 @@
 #include <sstream>
 #include <vector>
 
+#include "run_yscene.h"
 #include "test_sceneio.h"
 
 using namespace yocto;
@@ -29,20 +30,10 @@ namespace fs = std::filesystem;
 // -----------------------------------------------------------------------------
 namespace {
 
-struct limited_result {
-  int         status = -1;  // exit status, -1 if ended by a signal
-  int         signal = 0;   // the signal that ended it, if any
-  std::string output = "";  // stdout and stderr together
-};
-
 // Runs yscene with the arguments under RLIMIT_AS (2 GiB) and an alarm of
 // 30 seconds (a hang ends in SIGALRM, not in the test's timeout).
-limited_result run_limited(const std::vector<std::string>& arguments) {
-  auto result = limited_result{};
-  int  pipe_fds[2];
-  if (pipe(pipe_fds) != 0) return result;
-  auto pid = fork();
-  if (pid == 0) {
+command_result run_limited(const std::vector<std::string>& arguments) {
+  return run_yscene_in_child(arguments, []() {
 #ifndef YOCTO_SANITIZED
     // AddressSanitizer reserves terabytes of address space for its shadow
     // memory, so under it no address-space limit can apply: the sanitized
@@ -51,31 +42,11 @@ limited_result run_limited(const std::vector<std::string>& arguments) {
     setrlimit(RLIMIT_AS, &limit);
 #endif
     alarm(30);  // kept across exec
-    dup2(pipe_fds[1], 1);
-    dup2(pipe_fds[1], 2);
-    close(pipe_fds[0]);
-    close(pipe_fds[1]);
-    auto argv = std::vector<char*>{(char*)YSCENE_EXE};
-    for (auto& argument : arguments) argv.push_back((char*)argument.c_str());
-    argv.push_back(nullptr);
-    execv(YSCENE_EXE, argv.data());
-    _exit(127);
-  }
-  close(pipe_fds[1]);
-  char buffer[4096];
-  for (auto count = read(pipe_fds[0], buffer, sizeof(buffer)); count > 0;
-       count      = read(pipe_fds[0], buffer, sizeof(buffer)))
-    result.output.append(buffer, (size_t)count);
-  close(pipe_fds[0]);
-  auto status = 0;
-  waitpid(pid, &status, 0);
-  if (WIFEXITED(status)) result.status = WEXITSTATUS(status);
-  if (WIFSIGNALED(status)) result.signal = WTERMSIG(status);
-  return result;
+  });
 }
 
 // Exit status 1 and exactly one line, "error: ...", naming every part.
-void expect_refused(const limited_result& result, const std::vector<std::string>& parts) {
+void expect_refused(const command_result& result, const std::vector<std::string>& parts) {
   EXPECT_EQ(result.signal, 0) << result.output;
   EXPECT_EQ(result.status, 1) << result.output;
   auto lines  = std::vector<std::string>{};

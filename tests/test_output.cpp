@@ -14,6 +14,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <sstream>
 
 #include "run_yscene.h"
 
@@ -89,33 +90,16 @@ static int run_save_in_child(
   return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
 }
 
-// The same for the command line: exit status and output.
+// The same for the command line (arguments split at spaces).
 static command_result run_yscene_with_file_limit(size_t bytes, const std::string& arguments) {
-  auto result = command_result{};
-  int  pipes[2];
-  if (pipe(pipes) != 0) return result;
-  auto child = fork();
-  if (child == 0) {
+  auto split  = std::vector<std::string>{};
+  auto stream = std::istringstream(arguments);
+  for (auto argument = std::string{}; stream >> argument;) split.push_back(argument);
+  return run_yscene_in_child(split, [bytes]() {
     std::signal(SIGXFSZ, SIG_IGN);
     auto limit = rlimit{bytes, bytes};
     setrlimit(RLIMIT_FSIZE, &limit);
-    dup2(pipes[1], 1);
-    dup2(pipes[1], 2);
-    close(pipes[0]);
-    auto command = std::string("exec ") + YSCENE_EXE + " " + arguments;
-    execl("/bin/sh", "sh", "-c", command.c_str(), (char*)nullptr);
-    _exit(127);
-  }
-  close(pipes[1]);
-  char buffer[4096];
-  for (auto count = read(pipes[0], buffer, sizeof(buffer)); count > 0;
-       count       = read(pipes[0], buffer, sizeof(buffer)))
-    result.output.append(buffer, (size_t)count);
-  close(pipes[0]);
-  auto status = 0;
-  waitpid(child, &status, 0);
-  result.status = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  return result;
+  });
 }
 
 // A noisy image (it does not compress) of the given size.

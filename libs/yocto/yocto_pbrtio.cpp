@@ -657,14 +657,8 @@ static bool check_memory(pbrt_state& state, const std::string& what, double byte
 
 // Bytes the scene keeps for a shape: its arrays, its instance and the names.
 static double shape_bytes(const shape_data& shape) {
-  return (double)shape.triangles.size() * sizeof(vec3i) +
-         (double)shape.lines.size() * sizeof(vec2i) +
-         (double)shape.curves.size() * sizeof(vec4i) +
-         (double)shape.positions.size() * sizeof(vec3f) +
-         (double)shape.normals.size() * sizeof(vec3f) +
-         (double)shape.texcoords.size() * sizeof(vec2f) +
-         (double)shape.radius.size() * sizeof(float) + sizeof(shape_data) +
-         sizeof(instance_data) + 2 * sizeof(std::string);
+  return shape_memory(shape) + sizeof(shape_data) + sizeof(instance_data) +
+         2 * sizeof(std::string);
 }
 
 static double texture_bytes(const texture_data& texture) {

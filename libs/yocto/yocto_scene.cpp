@@ -123,6 +123,16 @@ vec3f eval_environment(const scene_data& scene, const environment_data& environm
 // -----------------------------------------------------------------------------
 namespace yocto {
 
+double shape_memory(const shape_data& shape) {
+  return (double)shape.triangles.size() * sizeof(vec3i) +
+         (double)shape.lines.size() * sizeof(vec2i) +
+         (double)shape.curves.size() * sizeof(vec4i) +
+         (double)shape.positions.size() * sizeof(vec3f) +
+         (double)shape.normals.size() * sizeof(vec3f) +
+         (double)shape.texcoords.size() * sizeof(vec2f) +
+         (double)shape.radius.size() * sizeof(float);
+}
+
 bbox3f compute_bounds(const shape_data& shape) {
   auto bounds = bbox3f{};
   for (auto i = 0; i < (int)shape.positions.size(); i++) {

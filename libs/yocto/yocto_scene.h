@@ -157,6 +157,9 @@ vec3f eval_environment(const scene_data& scene, const environment_data& environm
 vec2f direction_to_equirect(const vec3f& local_direction);
 vec3f equirect_to_direction(const vec2f& uv);
 
+// Bytes a shape's arrays hold (what loading it allocates).
+double shape_memory(const shape_data& shape);
+
 // Bounds of a shape and of the whole scene.
 bbox3f compute_bounds(const shape_data& shape);
 bbox3f compute_bounds(const scene_data& scene);

@@ -1879,17 +1879,6 @@ static std::vector<int> merge_same_files(
   return index;
 }
 
-// Memory a loaded shape holds.
-static double shape_bytes(const shape_data& shape) {
-  return (double)shape.triangles.size() * sizeof(vec3i) +
-         (double)shape.lines.size() * sizeof(vec2i) +
-         (double)shape.curves.size() * sizeof(vec4i) +
-         (double)shape.positions.size() * sizeof(vec3f) +
-         (double)shape.normals.size() * sizeof(vec3f) +
-         (double)shape.texcoords.size() * sizeof(vec2f) +
-         (double)shape.radius.size() * sizeof(float);
-}
-
 // Line and column of a byte offset, for json syntax errors.
 static std::string text_position(const std::string& text, size_t byte) {
   auto line = 1, column = 1;
@@ -2110,7 +2099,7 @@ static bool load_scene_json(json_loader& loader, scene_data& scene) {
     auto error = std::string{};
     if (!load_shape(shape_paths[i], scene.shapes[i], error))
       return json_fail(loader, shape_labels[i] + ": " + error);
-    total += shape_bytes(scene.shapes[i]);
+    total += shape_memory(scene.shapes[i]);
     if (!check_load_memory(loader.filename,
             "loading the shapes up to " + shape_labels[i], total, loader.error))
       return false;
