@@ -132,7 +132,8 @@ static void bad_inputs_fail_naming_the_file_and_leave_nothing() {
   // OpenImageIO's open; found by fuzz_image): refused from its header.
   ASSERT_TRUE(save_image(dir.file("chunk.png"), image, error)) << error;
   auto png = read_file(dir.file("chunk.png"));
-  png.insert(33, std::string("\x70\x00\x00\x14tEXtComment\0hello", 24));
+  auto chunk = std::string{"\x70\x00\x00\x14", 4} + "tEXtComment" + std::string(1, '\0') + "hello";
+  png.insert(33, chunk);
   write_file(dir.file("chunk.png"), png);
   auto chunk_bomb = texture_data{};
   EXPECT_FALSE(load_image(dir.file("chunk.png"), chunk_bomb, error));
