@@ -7,12 +7,15 @@
 
 #include <CLI/CLI.hpp>
 #include <atomic>
+#include <charconv>
 #include <chrono>
 #include <csignal>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
+#include <sstream>
+#include <functional>
 #include <yocto/yocto_bvh.h>
 #include <yocto/yocto_hairgen.h>
 #include <yocto/yocto_pbrtio.h>
@@ -154,6 +157,7 @@ struct render_options {
   std::string embree_config = "";      // Embree device configuration
   bool        bvh_compact   = false;   // Embree's compact BVH
   int         curve_pieces  = 4;       // most exact pieces of a bent Bezier segment
+  std::string sample_range  = "";      // A:B: render these samples as a part
 };
 
 // OUTPUT with "-NNNNNspp" before the extension.
@@ -226,11 +230,12 @@ static bool check_render_output(
   return check_output_file(options.output, side * side * 12 + 65536, error);
 }
 
-// After a failed save, writes the image as STEM-rescued.exr next to the
+// After a failed save, writes the render as STEM-rescued.exr next to the
 // output, else in the current folder, else in the temporary one (numbered
-// if taken: an existing file is never overwritten).
-static bool save_rescued_image(
-    const std::string& output, const texture_data& image, std::string& rescued) {
+// if taken: an existing file is never overwritten). `save` writes it to a
+// name without replacing anything.
+static bool save_rescued_render(const std::string& output,
+    const std::function<bool(const std::string&, std::string&)>& save, std::string& rescued) {
   auto name    = std::filesystem::path(output).stem().string() + "-rescued";
   auto folders = std::vector<std::string>{
       path_dirname(output), "", std::filesystem::temp_directory_path().string()};
@@ -241,15 +246,100 @@ static bool save_rescued_image(
       auto ec = std::error_code{};
       if (std::filesystem::exists(rescued, ec)) continue;
       auto error = std::string{};
-      if (save_image(rescued, image, error, 0, false)) return true;
+      if (save(rescued, error)) return true;
       break;  // this folder does not take it: the next one
     }
   }
   return false;
 }
 
+// What every part of one render shares, one "key=value" a line, for a merge
+// to compare: the scene's fingerprint, the camera and everything else that
+// changes a sample's value (floats with 9 digits, which round-trip). The
+// threads are left out: they do not change a bit.
+static std::string render_settings(const scene_data& scene, const trace_params& params,
+    const render_options& options, const trace_state& state) {
+  auto text = std::string{};
+  auto line = [&](const std::string& key, const std::string& value) {
+    text += key + "=" + value + "\n";
+  };
+  auto number = [](double value) {
+    char buffer[64];
+    std::snprintf(buffer, sizeof(buffer), "%.9g", value);
+    return std::string(buffer);
+  };
+  auto numbers = [&](std::initializer_list<float> values) {
+    auto result = std::string{};
+    for (auto value : values) result += (result.empty() ? "" : " ") + number(value);
+    return result;
+  };
+  char fingerprint[32];
+  std::snprintf(fingerprint, sizeof(fingerprint), "%016llx",
+      (unsigned long long)fingerprint_scene(scene));
+  auto& camera = scene.cameras[params.camera];
+  auto& frame  = camera.frame;
+  line("scene", fingerprint);
+  line("camera", std::to_string(params.camera));
+  line("camera_frame", numbers({frame.x.x, frame.x.y, frame.x.z, frame.y.x, frame.y.y,
+                           frame.y.z, frame.z.x, frame.z.y, frame.z.z, frame.o.x, frame.o.y,
+                           frame.o.z}));
+  line("camera_lens", numbers({camera.lens, camera.film, camera.aspect, camera.focus,
+                          camera.aperture, camera.orthographic ? 1.0f : 0.0f}));
+  line("resolution", std::to_string(state.width) + "x" + std::to_string(state.height));
+  line("seed", std::to_string(params.seed));
+  line("sampler", trace_sampler_names[(int)params.sampler]);
+  line("lights", trace_lights_names[(int)params.lights]);
+  line("sequence", sequence_names[(int)params.sequence]);
+  line("sobol_bounces", std::to_string(params.sobol_bounces));
+  line("bounces", std::to_string(params.bounces));
+  line("roulette_bounce", std::to_string(params.roulette_bounce));
+  line("shadow_threshold", number(params.shadow_threshold));
+  line("clamp", number(params.clamp));
+  line("hair", std::string(params.hair_four_numbers ? "four-numbers" : "demux") +
+                   (params.hair_per_hit ? " per-hit" : "") +
+                   (params.hair_fast_pow ? " fast-pow" : ""));
+  line("curves", options.curves + (options.curves == "lines"
+                                        ? " " + std::to_string(options.segments) : "") +
+                     (options.flat_curves ? " flat" : " round") + " pieces " +
+                     std::to_string(options.curve_pieces));
+  line("bvh", options.bvh_quality + (options.no_flatten ? " instances" : " flatten") +
+                  (options.bvh_compact ? " compact" : "") +
+                  (options.embree_config.empty() ? "" : " config " + options.embree_config));
+  return text;
+}
+
+// A:B from --sample-range: the part's samples A ... B - 1 of `samples`.
+static bool parse_sample_range(
+    const std::string& text, int samples, int& first, int& end, std::string& error) {
+  auto colon = text.find(':');
+  auto parse = [](const std::string& digits, int& value) {
+    auto result = std::from_chars(digits.data(), digits.data() + digits.size(), value);
+    return !digits.empty() && result.ec == std::errc{} &&
+           result.ptr == digits.data() + digits.size();
+  };
+  if (colon == std::string::npos || !parse(text.substr(0, colon), first) ||
+      !parse(text.substr(colon + 1), end)) {
+    error = "--sample-range " + text + ": expected A:B, two whole numbers";
+    return false;
+  }
+  if (first < 0 || end <= first || end > samples) {
+    error = "--sample-range " + text + ": expected 0 <= A < B <= " + std::to_string(samples) +
+            " (the render's samples)";
+    return false;
+  }
+  return true;
+}
+
 static int run_render(const render_options& options, trace_params params,
     const CLI::App& command) {
+  auto is_part = !options.sample_range.empty();
+  if (is_part && path_extension(options.output) != ".exr")
+    return print_error(options.output + ": a render part (--sample-range) is an OpenEXR "
+                                        "image: use a name ending in .exr");
+  if (is_part && (options.checkpoints || options.time_budget > 0 || options.embree_only))
+    return print_error(
+        "--sample-range renders one part: --checkpoints, --time-budget and --embree-only "
+        "do not apply");
   if (!is_image_filename(options.output))
     return print_error(options.output + ": unknown image extension (use exr, hdr, pfm, png or jpg)");
   // Ctrl-C from here on ends the render after its current pass (after the
@@ -280,6 +370,11 @@ static int run_render(const render_options& options, trace_params params,
     params.camera = (int)(found - scene.camera_names.begin());
   }
   if (!check_trace_params(scene, params, error)) return print_error(options.scene + ": " + error);
+  // The samples to render: all, or the part's range.
+  auto first = 0, end = params.samples;
+  if (is_part && !parse_sample_range(options.sample_range, params.samples, first, end, error))
+    return print_error(error);
+  auto count = end - first;
   // The image buffers, before they are allocated.
   auto size = camera_resolution(scene.cameras[params.camera], params.resolution);
   auto from = command.count("--resolution") ? std::string(" (--resolution)")
@@ -306,7 +401,7 @@ static int run_render(const render_options& options, trace_params params,
   auto context = make_trace_context(scene, params);
   if (options.embree_only) return run_raycast(options, scene, bvh, context, params);
   auto state  = trace_state{};
-  init_trace_state(state, scene, params);
+  init_trace_state(state, scene, params, first);
   if (!options.quiet)
     std::fprintf(stderr, "loaded %s in %.2fs, bvh in %.2fs (%s bytes); rendering %dx%d\n",
         options.scene.c_str(), load_time, bvh.build_seconds,
@@ -316,7 +411,7 @@ static int run_render(const render_options& options, trace_params params,
   auto render_start   = std::chrono::steady_clock::now();
   auto render_cpu     = cpu_seconds();
   auto last_progress  = -1.0;
-  while (state.samples < params.samples && (state.samples == 0 || !interrupted)) {
+  while (state.samples < count && (state.samples == 0 || !interrupted)) {
     trace_samples(state, scene, bvh, context, params, 1);
     auto elapsed = seconds_since(render_start);
     if (options.checkpoints && is_power_of_two(state.samples)) {
@@ -334,14 +429,14 @@ static int run_render(const render_options& options, trace_params params,
     if (options.time_budget > 0 && elapsed >= options.time_budget &&
         is_power_of_two(state.samples))
       break;
-    if (!options.quiet && (elapsed - last_progress > 0.25 || state.samples == params.samples)) {
+    if (!options.quiet && (elapsed - last_progress > 0.25 || state.samples == count)) {
       last_progress = elapsed;
-      auto fraction = (double)state.samples / params.samples;
+      auto fraction = (double)state.samples / count;
       auto eta      = elapsed / fraction - elapsed;
       auto bar      = std::string(30, ' ');
       for (auto i = 0; i < (int)(fraction * 30); i++) bar[i] = '#';
       std::fprintf(stderr, "\r[%s] %d/%d spp  elapsed %s  eta %s ", bar.c_str(),
-          state.samples, params.samples, format_duration(elapsed).c_str(),
+          state.samples, count, format_duration(elapsed).c_str(),
           format_duration(eta).c_str());
     }
   }
@@ -355,18 +450,44 @@ static int run_render(const render_options& options, trace_params params,
     std::fprintf(stderr, "warning: %lld NaN or Inf samples were dropped\n",
         (long long)state.nonfinite.load());
 
-  auto image = get_image(state);
-  if (!save_image(options.output, image, error, options.exposure)) {
+  // A part keeps the exact sums of the samples done (all of its range,
+  // unless interrupted: a merge then reports the gap).
+  auto part = render_part{};
+  if (is_part) {
+    part.settings  = render_settings(scene, params, options, state);
+    part.samples   = params.samples;
+    part.first     = first;
+    part.count     = state.samples;
+    part.width     = state.width;
+    part.height    = state.height;
+    part.rays      = state.rays;
+    part.nonfinite = state.nonfinite;
+    part.sums      = std::move(state.sums);
+  }
+  auto image = is_part ? texture_data{} : get_image(state);
+  auto save  = [&](const std::string& filename, std::string& error, bool replace) {
+    return is_part ? save_render_part(filename, part, error, replace)
+                   : save_image(filename, image, error, options.exposure, replace);
+  };
+  if (!save(options.output, error, true)) {
     // The output was checked before the render, yet the write failed (the
     // disk filled up, say): the samples are worth keeping.
-    auto rescued = std::string{};
-    if (save_rescued_image(options.output, image, rescued))
+    auto rescued     = std::string{};
+    auto save_rescue = [&](const std::string& filename, std::string& error) {
+      return is_part ? save(filename, error, false)
+                     : save_image(filename, image, error, 0, false);
+    };
+    if (save_rescued_render(options.output, save_rescue, rescued))
       return print_error(error + "; the render was saved to " + rescued);
     return print_error(error + "; the render could not be saved elsewhere either");
   }
   auto samples = (double)state.width * state.height * state.samples;
+  auto what    = is_part ? "part " + options.output + " (samples " + std::to_string(first) + ":" +
+                            std::to_string(first + state.samples) + " of " +
+                            std::to_string(params.samples) + ")"
+                         : options.output;
   std::printf("rendered %s: %dx%d, %d spp in %.2fs (%s samples/s, %s rays/s, peak memory %s bytes)\n",
-      options.output.c_str(), state.width, state.height, state.samples, render_time,
+      what.c_str(), state.width, state.height, state.samples, render_time,
       format_count(samples / render_time).c_str(),
       format_count((double)state.rays / render_time).c_str(),
       format_count((double)peak_memory()).c_str());
@@ -380,6 +501,134 @@ static int run_render(const render_options& options, trace_params params,
         state.height, state.samples, render_time, render_cpu, (long long)state.rays.load(),
         (long long)peak_memory());
   }
+  return 0;
+}
+
+// -----------------------------------------------------------------------------
+// MERGE
+// -----------------------------------------------------------------------------
+
+struct merge_options {
+  std::vector<std::string> parts    = {};
+  std::string              output   = "";
+  float                    exposure = 0;
+  bool                     part     = false;  // write a part (the union), not an image
+  bool                     quiet    = false;
+};
+
+// The first line of settings a that b does not have, and b's line with the
+// same key ("" if none).
+static std::pair<std::string, std::string> first_difference(
+    const std::string& a, const std::string& b) {
+  auto lines = [](const std::string& text) {
+    auto result = std::vector<std::string>{};
+    auto stream = std::istringstream(text);
+    for (auto line = std::string{}; std::getline(stream, line);) result.push_back(line);
+    return result;
+  };
+  auto lines_a = lines(a), lines_b = lines(b);
+  for (auto i = 0; i < (int)std::max(lines_a.size(), lines_b.size()); i++) {
+    auto line_a = i < (int)lines_a.size() ? lines_a[i] : std::string{"(nothing)"};
+    auto line_b = i < (int)lines_b.size() ? lines_b[i] : std::string{"(nothing)"};
+    if (line_a != line_b) return {line_a, line_b};
+  }
+  return {"", ""};
+}
+
+// Adds up parts of one render: they must share the scene and settings and
+// cover [0, N) once (for an image) or one range without gaps (for a part).
+// The sums are exact, so the image has the bits of a render on one machine.
+static int run_merge(const merge_options& options) {
+  auto& output = options.output;
+  if (options.part && path_extension(output) != ".exr")
+    return print_error(output + ": a render part is an OpenEXR image: use a name ending in .exr");
+  if (!options.part && !is_image_filename(output))
+    return print_error(output + ": unknown image extension (use exr, hdr, pfm, png or jpg)");
+  struct part_range {
+    std::string filename = "";
+    int         first = 0, end = 0;
+  };
+  auto ranges = std::vector<part_range>{};
+  auto merged = render_part{};
+  auto error  = std::string{};
+  auto range_text = [](int first, int end) {
+    return std::to_string(first) + ":" + std::to_string(end);
+  };
+  for (auto& filename : options.parts) {
+    auto part = render_part{};
+    if (!load_render_part(filename, part, error)) return print_error(error);
+    if (ranges.empty()) {
+      // Fail before the work if the output cannot be written.
+      auto bytes = (double)part.width * part.height * (options.part ? 100 : 12) + 65536;
+      if (!check_output_file(output, bytes, error)) return print_error(error);
+      merged.settings = part.settings;
+      merged.samples  = part.samples;
+      merged.width    = part.width;
+      merged.height   = part.height;
+      merged.sums.assign(part.sums.size(), fixed_sum3{});
+    }
+    auto& reference = ranges.empty() ? filename : ranges.front().filename;
+    if (part.samples != merged.samples)
+      return print_error(filename + ": a part of a " + std::to_string(part.samples) +
+                         "-sample render, but " + reference + " is of a " +
+                         std::to_string(merged.samples) + "-sample one");
+    if (part.settings != merged.settings) {
+      auto [here, there] = first_difference(part.settings, merged.settings);
+      return print_error(filename + ": not a part of the render of " + reference + ": " + here +
+                         " here, " + there + " there (parts of one render share the scene "
+                         "and every setting)");
+    }
+    if (part.width != merged.width || part.height != merged.height ||
+        part.sums.size() != merged.sums.size())
+      return print_error(filename + ": " + std::to_string(part.width) + "x" +
+                         std::to_string(part.height) + " pixels, but " + reference + " has " +
+                         std::to_string(merged.width) + "x" + std::to_string(merged.height));
+    for (size_t i = 0; i < part.sums.size(); i++) add_fixed(merged.sums[i], part.sums[i]);
+    merged.rays += part.rays;
+    merged.nonfinite += part.nonfinite;
+    ranges.push_back({filename, part.first, part.first + part.count});
+  }
+  // Each sample once: sorted by range, neighbours neither overlap nor leave
+  // a gap; an image needs all of [0, N).
+  std::stable_sort(ranges.begin(), ranges.end(),
+      [](const part_range& a, const part_range& b) { return a.first < b.first; });
+  for (size_t i = 1; i < ranges.size(); i++) {
+    auto &before = ranges[i - 1], &after = ranges[i];
+    if (after.first < before.end)
+      return print_error(after.filename + ": samples " + range_text(after.first, after.end) +
+                         " overlap those of " + before.filename + " (" +
+                         range_text(before.first, before.end) + ")");
+    if (after.first > before.end)
+      return print_error("samples " + range_text(before.end, after.first) +
+                         " are in no part: a gap between " + before.filename + " (" +
+                         range_text(before.first, before.end) + ") and " + after.filename +
+                         " (" + range_text(after.first, after.end) + ")");
+  }
+  auto first = ranges.front().first, end = ranges.back().end;
+  if (!options.part && first > 0)
+    return print_error("samples " + range_text(0, first) + " of " +
+                       std::to_string(merged.samples) + " are in no part (the first, " +
+                       ranges.front().filename + ", starts at " + std::to_string(first) + ")");
+  if (!options.part && end < merged.samples)
+    return print_error("samples " + range_text(end, merged.samples) + " of " +
+                       std::to_string(merged.samples) + " are in no part (the last, " +
+                       ranges.back().filename + ", ends at " + std::to_string(end) + ")");
+  merged.first = first;
+  merged.count = end - first;
+  if (!make_output_directory(output, error)) return print_error(error);
+  auto saved = options.part ? save_render_part(output, merged, error)
+                            : save_image(output,
+                                  get_image(merged.width, merged.height, merged.sums,
+                                      merged.samples),
+                                  error, options.exposure);
+  if (!saved) return print_error(error);
+  if (merged.nonfinite > 0)
+    std::fprintf(stderr, "warning: %lld NaN or Inf samples were dropped\n",
+        (long long)merged.nonfinite);
+  if (!options.quiet)
+    std::printf("merged %zu parts into %s: %dx%d, samples %s of %d (%s rays)\n",
+        ranges.size(), output.c_str(), merged.width, merged.height,
+        range_text(first, end).c_str(), merged.samples, format_count((double)merged.rays).c_str());
   return 0;
 }
 
@@ -657,6 +906,9 @@ static int run_main(int argc, const char** argv) {
   render->add_flag("--bvh-compact", render_opts.bvh_compact,
       "Embree's compact BVH layout (less memory, slower)");
   render->add_flag("--stats", render_opts.stats, "print a machine-readable line of figures");
+  render->add_option("--sample-range", render_opts.sample_range,
+      "A:B: render only samples A ... B-1 of the --samples render and write them as a part "
+      "(.exr) for yscene merge");
   render->add_flag("--embree-only", render_opts.embree_only,
       "render, then cast the same rays through Embree alone and compare rays/s "
       "(no image is written; use few samples: every ray is kept in memory)");
@@ -674,6 +926,21 @@ static int run_main(int argc, const char** argv) {
   auto info       = app.add_subcommand("info", "print scene statistics");
   info->add_option("scene", info_scene, "scene (json, pbrt or hair)")->required();
   add_max_memory(info);
+
+  auto merge_opts = merge_options{};
+  auto merge      = app.add_subcommand("merge",
+      "add up the parts of a render made with --sample-range into its image (bit for bit the "
+      "image of one render)");
+  merge->add_option("parts", merge_opts.parts, "render parts (.exr), in any order")
+      ->required();
+  merge->add_option("--output,-o", merge_opts.output,
+          "output image (exr, hdr, pfm, png, jpg), or a part (exr) with --part")
+      ->required();
+  merge->add_option("--exposure,-e", merge_opts.exposure, "exposure for png/jpg (stops)");
+  merge->add_flag("--part", merge_opts.part,
+      "write the merged parts as one part (their ranges must be contiguous), to merge later");
+  merge->add_flag("--quiet,-q", merge_opts.quiet, "print nothing on success");
+  add_max_memory(merge);
 
   auto convert_in = std::string{}, convert_out = std::string{}, curves_mode = std::string{"native"};
   auto pbrt       = pbrt_params{};
@@ -745,6 +1012,8 @@ static int run_main(int argc, const char** argv) {
     params.lights   = enum_from_name<trace_lights_type>(trace_lights_names, lights);
     params.sequence = enum_from_name<sequence_type>(sequence_names, sequence);
     return run_render(render_opts, params, *render);
+  } else if (merge->parsed()) {
+    return run_merge(merge_opts);
   } else if (info->parsed()) {
     return run_info(info_scene);
   } else if (hair->parsed()) {

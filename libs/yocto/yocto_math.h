@@ -13,6 +13,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <cstring>
 #include <glm/glm.hpp>
 #include <limits>
 
@@ -224,6 +225,128 @@ inline bbox3f merge(const bbox3f& a, const bbox3f& b) {
 inline bool empty(const bbox3f& a) { return a.min.x > a.max.x; }
 inline vec3f center(const bbox3f& a) { return (a.min + a.max) / 2.0f; }
 inline vec3f size(const bbox3f& a) { return a.max - a.min; }
+
+}  // namespace yocto
+
+// -----------------------------------------------------------------------------
+// HASHING
+// -----------------------------------------------------------------------------
+namespace yocto {
+
+// A 64-bit hash of bytes fed in pieces, for fingerprints and checksums (not
+// for security): eight bytes at a time, each mixed in with the block steps
+// of MurmurHash3 x64 (Appleby, 2011), then the count of bytes, so that
+// arrays of different lengths differ.
+struct hash_stream {
+  uint64_t hash = 0x9e3779b97f4a7c15ull;
+};
+inline void hash_word(hash_stream& stream, uint64_t word) {
+  word *= 0x87c37b91114253d5ull;
+  word = (word << 31) | (word >> 33);
+  word *= 0x4cf5ad432745937full;
+  stream.hash ^= word;
+  stream.hash = ((stream.hash << 27) | (stream.hash >> 37)) * 5 + 0x52dce729;
+}
+inline void hash_bytes(hash_stream& stream, const void* data, size_t size) {
+  auto bytes = (const unsigned char*)data;
+  for (size_t i = 0; i < size; i += 8) {
+    auto word = (uint64_t)0;
+    std::memcpy(&word, bytes + i, std::min(size - i, (size_t)8));
+    hash_word(stream, word);
+  }
+  hash_word(stream, size);
+}
+
+}  // namespace yocto
+
+// -----------------------------------------------------------------------------
+// EXACT SUMS
+// -----------------------------------------------------------------------------
+namespace yocto {
+
+// A sum of RGB samples that does not depend on the order or the grouping of
+// its terms, so that a render split into sample ranges and merged gives the
+// same bits as one render. Each channel is a 192-bit two's-complement
+// integer counting units of 2^-64 (three words, least significant first):
+// integer additions are associative and commutative, even when they wrap.
+// A sample component x is added as x * 2^64 rounded toward zero, which is
+// exact for |x| >= 2^-41 (a float's 24 bits then all lie above 2^-64);
+// smaller components lose at most 2^-64 each. Components must be finite and
+// below fixed_sum_max_sample in magnitude: with fewer than 2^31 samples the
+// sum then stays below 2^127, within the 191 bits of magnitude.
+struct fixed_sum3 {
+  uint64_t words[9] = {};  // channel c in words[3c ... 3c + 2]
+};
+inline constexpr float fixed_sum_max_sample = 0x1p96f;
+
+inline bool operator==(const fixed_sum3& a, const fixed_sum3& b) {
+  return std::memcmp(a.words, b.words, sizeof(a.words)) == 0;
+}
+
+// Adds the 192-bit integer b to a, modulo 2^192.
+inline void add_fixed_words(uint64_t* a, const uint64_t* b) {
+  auto carry = (uint64_t)0;
+  for (auto i = 0; i < 3; i++) {
+    auto sum = (unsigned __int128)a[i] + b[i] + carry;
+    a[i]     = (uint64_t)sum;
+    carry    = (uint64_t)(sum >> 64);
+  }
+}
+
+// Two's complement negation, modulo 2^192.
+inline void negate_fixed_words(uint64_t* words) {
+  const uint64_t one[3] = {1, 0, 0};
+  for (auto i = 0; i < 3; i++) words[i] = ~words[i];
+  add_fixed_words(words, one);
+}
+
+// The 192-bit value of x * 2^64 rounded toward zero (|x| below
+// fixed_sum_max_sample, finite).
+inline void float_to_fixed_words(float x, uint64_t* words) {
+  words[0] = words[1] = words[2] = 0;
+  auto bits = (uint32_t)0;
+  std::memcpy(&bits, &x, sizeof(bits));
+  auto exponent = (int)((bits >> 23) & 0xff);
+  if (exponent == 0) return;  // zero or subnormal: below 2^-126, so 0 units
+  // x = mantissa * 2^(exponent - 150) = mantissa * 2^(exponent - 86) units.
+  auto mantissa = (uint64_t)((bits & 0x7fffff) | 0x800000);
+  auto shift    = exponent - 86;
+  if (shift <= -24) return;
+  if (shift < 0) {
+    words[0] = mantissa >> -shift;
+  } else {
+    auto word = shift / 64, bit = shift % 64;
+    words[word] = mantissa << bit;
+    if (bit > 40 && word < 2) words[word + 1] = mantissa >> (64 - bit);
+  }
+  if (bits >> 31) negate_fixed_words(words);
+}
+
+inline void add_fixed(fixed_sum3& sum, const vec3f& sample) {
+  for (auto c = 0; c < 3; c++) {
+    uint64_t words[3];
+    float_to_fixed_words(sample[c], words);
+    add_fixed_words(sum.words + 3 * c, words);
+  }
+}
+inline void add_fixed(fixed_sum3& sum, const fixed_sum3& other) {
+  for (auto c = 0; c < 3; c++) add_fixed_words(sum.words + 3 * c, other.words + 3 * c);
+}
+
+// The sum as doubles (rounded; the same bits for the same sum).
+inline glm::dvec3 fixed_to_double(const fixed_sum3& sum) {
+  auto value = glm::dvec3{0, 0, 0};
+  for (auto c = 0; c < 3; c++) {
+    uint64_t words[3] = {sum.words[3 * c], sum.words[3 * c + 1], sum.words[3 * c + 2]};
+    auto negative = (words[2] >> 63) != 0;
+    if (negative) negate_fixed_words(words);
+    // Units of 2^-64: words[0] * 2^-64 + words[1] + words[2] * 2^64.
+    auto magnitude = std::ldexp((double)words[0], -64) + (double)words[1] +
+                     std::ldexp((double)words[2], 64);
+    value[c] = negative ? -magnitude : magnitude;
+  }
+  return value;
+}
 
 }  // namespace yocto
 

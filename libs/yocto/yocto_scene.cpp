@@ -133,6 +133,59 @@ double shape_memory(const shape_data& shape) {
          (double)shape.radius.size() * sizeof(float);
 }
 
+// Scene values into a hash_stream.
+struct scene_hasher {
+  hash_stream stream = {};
+  void add_bytes(const void* data, size_t size) { hash_bytes(stream, data, size); }
+  template <typename T>
+  void add(const std::vector<T>& values) {
+    add_bytes(values.data(), values.size() * sizeof(T));
+  }
+  template <typename... Ts>
+  void add_values(const Ts&... values) {
+    // Field by field: a struct's padding bytes are not part of its value.
+    (add_bytes(&values, sizeof(values)), ...);
+  }
+  void add(const frame3f& frame) { add_values(frame.x, frame.y, frame.z, frame.o); }
+};
+
+uint64_t fingerprint_scene(const scene_data& scene) {
+  auto hasher = scene_hasher{};
+  for (auto& shape : scene.shapes) {
+    hasher.add(shape.triangles);
+    hasher.add(shape.lines);
+    hasher.add(shape.curves);
+    hasher.add(shape.positions);
+    hasher.add(shape.normals);
+    hasher.add(shape.texcoords);
+    hasher.add(shape.radius);
+  }
+  for (auto& texture : scene.textures) {
+    hasher.add_values(texture.width, texture.height);
+    hasher.add(texture.pixels);
+  }
+  for (auto& material : scene.materials) {
+    auto& hair = material.hair;
+    hasher.add_values(material.type, material.emission, material.color, material.roughness,
+        material.ior, material.emission_tex, material.color_tex, hair.sigma_a, hair.color,
+        hair.eumelanin, hair.pheomelanin, hair.beta_m, hair.beta_n, hair.alpha, hair.eta,
+        hair.has_sigma_a, hair.has_color);
+  }
+  for (auto& instance : scene.instances) {
+    hasher.add(instance.frame);
+    hasher.add_values(instance.shape, instance.material);
+  }
+  for (auto& environment : scene.environments) {
+    hasher.add(environment.frame);
+    hasher.add_values(environment.emission, environment.emission_tex);
+  }
+  for (auto& light : scene.distant_lights) hasher.add_values(light.direction, light.emission);
+  // The element counts, so that moving data between groups changes it too.
+  hasher.add_values(scene.shapes.size(), scene.textures.size(), scene.materials.size(),
+      scene.instances.size(), scene.environments.size(), scene.distant_lights.size());
+  return hasher.stream.hash;
+}
+
 bbox3f compute_bounds(const shape_data& shape) {
   auto bounds = bbox3f{};
   for (auto i = 0; i < (int)shape.positions.size(); i++) {

@@ -160,6 +160,13 @@ vec3f equirect_to_direction(const vec2f& uv);
 // Bytes a shape's arrays hold (what loading it allocates).
 double shape_memory(const shape_data& shape);
 
+// A 64-bit fingerprint of what a render of the scene depends on besides
+// the camera: shapes, textures, materials, instances, environments and
+// distant lights, value by value (names, files and settings left out). Two
+// loads of the same scene give the same fingerprint; any changed value
+// almost surely changes it.
+uint64_t fingerprint_scene(const scene_data& scene);
+
 // Bounds of a shape and of the whole scene.
 bbox3f compute_bounds(const shape_data& shape);
 bbox3f compute_bounds(const scene_data& scene);

@@ -1347,6 +1347,199 @@ bool save_image(const std::string& filename, const texture_data& image,
 }  // namespace yocto
 
 // -----------------------------------------------------------------------------
+// RENDER PARTS
+// -----------------------------------------------------------------------------
+namespace yocto {
+
+static const auto render_part_format = std::string{"yocto-hair render part 1"};
+static const auto render_part_channels = std::array<std::string, 3>{"R", "G", "B"};
+
+// The name of the channel with bits 32 half ... 32 half + 31 of channel c.
+static std::string render_part_channel(int c, int half) {
+  return "sum." + render_part_channels[c] + "." + std::to_string(half);
+}
+
+static std::string render_part_range(const render_part& part) {
+  return std::to_string(part.first) + ":" + std::to_string(part.first + part.count);
+}
+
+static uint64_t render_part_checksum(const render_part& part) {
+  auto stream = hash_stream{};
+  hash_bytes(stream, render_part_format.data(), render_part_format.size());
+  hash_bytes(stream, part.settings.data(), part.settings.size());
+  for (auto value : {(int64_t)part.samples, (int64_t)part.first, (int64_t)part.count,
+           (int64_t)part.width, (int64_t)part.height, part.rays, part.nonfinite})
+    hash_word(stream, (uint64_t)value);
+  hash_bytes(stream, part.sums.data(), part.sums.size() * sizeof(fixed_sum3));
+  return stream.hash;
+}
+
+static std::string hex_string(uint64_t value) {
+  char buffer[32];
+  std::snprintf(buffer, sizeof(buffer), "%016llx", (unsigned long long)value);
+  return buffer;
+}
+
+bool save_render_part(const std::string& filename, const render_part& part,
+    std::string& error, bool replace) {
+  if (path_extension(filename) != ".exr") {
+    error = filename + ": a render part is an OpenEXR image: use a name ending in .exr";
+    return false;
+  }
+  if (part.width <= 0 || part.height <= 0 || part.count <= 0 ||
+      part.sums.size() != (size_t)part.width * (size_t)part.height) {
+    error = filename + ": cannot save a render part without samples or pixels";
+    return false;
+  }
+  // R, G, B as floats, then the words as 32-bit halves.
+  auto channels = 3 + 18;
+  auto spec     = OIIO::ImageSpec(part.width, part.height, channels, OIIO::TypeDesc::FLOAT);
+  spec.channelnames.assign(render_part_channels.begin(), render_part_channels.end());
+  spec.channelformats.assign(3, OIIO::TypeDesc::FLOAT);
+  for (auto c = 0; c < 3; c++) {
+    for (auto half = 0; half < 6; half++) {
+      spec.channelnames.push_back(render_part_channel(c, half));
+      spec.channelformats.push_back(OIIO::TypeDesc::UINT32);
+    }
+  }
+  spec.attribute("compression", "zip");
+  spec.attribute("yocto:part", render_part_format);
+  spec.attribute("yocto:settings", part.settings);
+  spec.attribute("yocto:samples", std::to_string(part.samples));
+  spec.attribute("yocto:range", render_part_range(part));
+  spec.attribute("yocto:rays", std::to_string(part.rays));
+  spec.attribute("yocto:nonfinite", std::to_string(part.nonfinite));
+  spec.attribute("yocto:checksum", hex_string(render_part_checksum(part)));
+  // Pixels in the native layout: 3 floats, then 18 unsigned ints.
+  struct part_pixel {
+    float    mean[3];
+    uint32_t halves[18];
+  };
+  static_assert(sizeof(part_pixel) == 21 * 4);
+  auto pixels = std::vector<part_pixel>(part.sums.size());
+  for (size_t i = 0; i < part.sums.size(); i++) {
+    auto mean = fixed_to_double(part.sums[i]) / (double)part.count;
+    for (auto c = 0; c < 3; c++) {
+      pixels[i].mean[c] = (float)mean[c];
+      for (auto word = 0; word < 3; word++) {
+        auto value = part.sums[i].words[3 * c + word];
+        pixels[i].halves[6 * c + 2 * word]     = (uint32_t)value;
+        pixels[i].halves[6 * c + 2 * word + 1] = (uint32_t)(value >> 32);
+      }
+    }
+  }
+  auto output = OIIO::ImageOutput::create(filename);
+  if (!output) {
+    error = filename + ": cannot save render part (" + OIIO::geterror() + ")";
+    return false;
+  }
+  auto bytes  = std::vector<unsigned char>{};
+  auto memory = OIIO::Filesystem::IOVecOutput(bytes);
+  auto proxy  = (OIIO::Filesystem::IOProxy*)&memory;
+  spec.attribute("oiio:ioproxy", OIIO::TypeDesc::PTR, &proxy);
+  if (!output->open(filename, spec) ||
+      !output->write_image(OIIO::TypeDesc::UNKNOWN, pixels.data()) || !output->close()) {
+    error = filename + ": cannot save render part (" + output->geterror() + ")";
+    return false;
+  }
+  return save_binary(filename, std::string(bytes.begin(), bytes.end()), error, replace);
+}
+
+// A whole decimal number from an attribute, or false.
+static bool parse_part_number(const std::string& text, int64_t& value) {
+  auto end    = text.data() + text.size();
+  auto result = std::from_chars(text.data(), end, value);
+  return !text.empty() && result.ec == std::errc{} && result.ptr == end;
+}
+
+bool load_render_part(const std::string& filename, render_part& part, std::string& error) {
+  part           = {};
+  auto file_size = (size_t)0;
+  if (!check_input_file(filename, file_size, error)) return false;
+  auto input = OIIO::ImageInput::open(filename);
+  if (!input) {
+    auto message = OIIO::geterror();
+    error = filename + ": cannot open render part" + (message.empty() ? "" : " (" + message + ")");
+    return false;
+  }
+  auto& spec     = input->spec();
+  auto  not_part = [&](const std::string& what) {
+    error = filename + ": not a render part of yocto-hair (" + what + ")";
+    return false;
+  };
+  if (spec.get_string_attribute("yocto:part") != render_part_format)
+    return not_part("no yocto:part attribute \"" + render_part_format + "\"");
+  auto samples = (int64_t)0, first = (int64_t)0, end = (int64_t)0;
+  auto range   = std::string(spec.get_string_attribute("yocto:range"));
+  auto colon   = range.find(':');
+  if (!parse_part_number(spec.get_string_attribute("yocto:samples"), samples) ||
+      colon == std::string::npos || !parse_part_number(range.substr(0, colon), first) ||
+      !parse_part_number(range.substr(colon + 1), end) ||
+      !parse_part_number(spec.get_string_attribute("yocto:rays"), part.rays) ||
+      !parse_part_number(spec.get_string_attribute("yocto:nonfinite"), part.nonfinite))
+    return not_part("bad yocto:samples, yocto:range, yocto:rays or yocto:nonfinite");
+  if (samples <= 0 || samples > std::numeric_limits<int>::max() || first < 0 ||
+      end <= first || end > samples) {
+    error = filename + ": sample range " + range + " is not within the render's " +
+            std::to_string(samples) + " samples";
+    return false;
+  }
+  part.samples  = (int)samples;
+  part.first    = (int)first;
+  part.count    = (int)(end - first);
+  part.settings = std::string(spec.get_string_attribute("yocto:settings"));
+  part.width    = spec.width;
+  part.height   = spec.height;
+  // Where each channel is in a native pixel.
+  auto offsets = std::vector<size_t>(spec.nchannels);
+  for (auto c = 1; c < spec.nchannels; c++)
+    offsets[c] = offsets[c - 1] + spec.channelformat(c - 1).size();
+  auto sum_offsets = std::array<size_t, 18>{};
+  for (auto c = 0; c < 3; c++) {
+    for (auto half = 0; half < 6; half++) {
+      auto name  = render_part_channel(c, half);
+      auto found = std::find(spec.channelnames.begin(), spec.channelnames.end(), name);
+      if (found == spec.channelnames.end()) return not_part("no channel " + name);
+      auto index = (int)(found - spec.channelnames.begin());
+      if (spec.channelformat(index) != OIIO::TypeDesc::UINT32)
+        return not_part("channel " + name + " is not 32-bit unsigned");
+      sum_offsets[6 * c + half] = offsets[index];
+    }
+  }
+  if (spec.width <= 0 || spec.height <= 0 || spec.depth > 1) return not_part("no pixels");
+  auto pixels      = (double)spec.width * (double)spec.height;
+  auto pixel_bytes = spec.pixel_bytes(true);
+  if (!check_load_memory(filename,
+          "a " + std::to_string(spec.width) + "x" + std::to_string(spec.height) + " render part",
+          pixels * ((double)pixel_bytes + sizeof(fixed_sum3)), error))
+    return false;
+  auto buffer = std::vector<unsigned char>((size_t)pixels * pixel_bytes);
+  if (!input->read_image(0, 0, 0, spec.nchannels, OIIO::TypeDesc::UNKNOWN, buffer.data())) {
+    error = filename + ": cannot read render part (" + input->geterror() + ")";
+    return false;
+  }
+  input->close();
+  part.sums.resize((size_t)pixels);
+  for (size_t i = 0; i < part.sums.size(); i++) {
+    auto pixel = buffer.data() + i * pixel_bytes;
+    for (auto k = 0; k < 9; k++) {
+      uint32_t low, high;
+      std::memcpy(&low, pixel + sum_offsets[2 * k], 4);
+      std::memcpy(&high, pixel + sum_offsets[2 * k + 1], 4);
+      part.sums[i].words[k] = (uint64_t)high << 32 | low;
+    }
+  }
+  if (spec.get_string_attribute("yocto:checksum") != hex_string(render_part_checksum(part))) {
+    error = filename + ": render part is damaged (its checksum does not match its contents)";
+    part  = {};
+    return false;
+  }
+  return true;
+}
+
+}  // namespace yocto
+
+// -----------------------------------------------------------------------------
 // JSON SCENES: LOADING
 // -----------------------------------------------------------------------------
 namespace yocto {

@@ -105,6 +105,47 @@ bool is_image_filename(const std::string& filename);
 }  // namespace yocto
 
 // -----------------------------------------------------------------------------
+// RENDER PARTS
+// -----------------------------------------------------------------------------
+namespace yocto {
+
+// A part of a render split by sample ranges: the exact sums (fixed_sum3) of
+// samples first ... first + count - 1 of every pixel of a render of
+// `samples` samples a pixel, and what a merge must check. `settings` holds
+// "key=value" lines that every part of one render shares: the scene's
+// fingerprint, seed, resolution, camera, sampler, bounces, clamp and the
+// rest (the caller writes them; a merge compares them line by line).
+struct render_part {
+  std::string             settings  = "";
+  int                     samples   = 0;  // N: the whole render's samples a pixel
+  int                     first     = 0;  // the part's samples: first ... first + count - 1
+  int                     count     = 0;
+  int                     width     = 0;
+  int                     height    = 0;
+  int64_t                 rays      = 0;  // rays cast for these samples
+  int64_t                 nonfinite = 0;  // samples dropped as NaN or Inf
+  std::vector<fixed_sum3> sums      = {};
+};
+
+// Saves a part as an OpenEXR image (the name must end in .exr), written as
+// any output (complete or absent). Channels R, G, B hold the mean of the
+// part's samples, to look at; the 18 32-bit unsigned channels sum.R.0 ...
+// sum.B.5 hold the sums' words in 32-bit halves, least significant first.
+// String attributes: yocto:part (the format, "yocto-hair render part 1"),
+// yocto:settings, yocto:samples, yocto:range ("first:end", end excluded),
+// yocto:rays, yocto:nonfinite and yocto:checksum (16 hex digits: a
+// hash_stream of the attributes and the sums, so that a damaged file is
+// found out).
+bool save_render_part(const std::string& filename, const render_part& part,
+    std::string& error, bool replace = true);
+
+// Loads a part: a file that is not a part, truncated, damaged (checksum),
+// or inconsistent (a range outside [0, samples)) is an error naming it.
+bool load_render_part(const std::string& filename, render_part& part, std::string& error);
+
+}  // namespace yocto
+
+// -----------------------------------------------------------------------------
 // FILE HELPERS
 // -----------------------------------------------------------------------------
 namespace yocto {

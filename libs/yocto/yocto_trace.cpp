@@ -564,15 +564,17 @@ bool check_trace_params(const scene_data& scene, const trace_params& params,
 double trace_image_bytes(const scene_data& scene, const trace_params& params) {
   auto size = camera_resolution(scene.cameras[params.camera], params.resolution);
   return (double)size.x * (double)size.y *
-         (sizeof(glm::dvec3) + sizeof(vec3f) + 3 * sizeof(uint8_t));
+         (sizeof(fixed_sum3) + sizeof(vec3f) + 3 * sizeof(uint8_t));
 }
 
-void init_trace_state(trace_state& state, const scene_data& scene, const trace_params& params) {
+void init_trace_state(trace_state& state, const scene_data& scene, const trace_params& params,
+    int first) {
   auto size     = camera_resolution(scene.cameras[params.camera], params.resolution);
   state.width   = size.x;
   state.height  = size.y;
+  state.first   = first;
   state.samples = 0;
-  state.sums.assign((size_t)size.x * size.y, glm::dvec3{0, 0, 0});
+  state.sums.assign((size_t)size.x * size.y, fixed_sum3{});
   state.rays      = 0;
   state.nonfinite = 0;
 }
@@ -606,8 +608,9 @@ static void trace_rows(trace_state& state, const scene_data& scene, const scene_
     auto record = records ? &(*records)[j] : nullptr;
     for (auto i = 0; i < state.width; i++) {
       auto pixel = j * state.width + i;
-      auto sum   = glm::dvec3{0, 0, 0};
-      for (auto s = state.samples; s < state.samples + count; s++) {
+      auto& sum  = state.sums[pixel];
+      auto  next = state.first + state.samples;
+      for (auto s = next; s < next + count; s++) {
         auto sequence = make_sequence(params.sequence, params.seed, pixel, (uint32_t)s,
             trace_bounce_pairs(params.sobol_bounces));
         auto puv      = sample_sequence2f(sequence, trace_pair_pixel);
@@ -627,9 +630,13 @@ static void trace_rows(trace_state& state, const scene_data& scene, const scene_
         }
         if (params.clamp > 0 && max_component(radiance) > params.clamp)
           radiance *= params.clamp / max_component(radiance);
-        sum += glm::dvec3(radiance);
+        // Beyond what the exact sum holds (1e29): as good as infinite.
+        if (max_component(abs(radiance)) >= fixed_sum_max_sample) {
+          nonfinite++;
+          continue;
+        }
+        add_fixed(sum, radiance);
       }
-      state.sums[pixel] += sum;
     }
     state.rays += rays;
     state.nonfinite += nonfinite;
@@ -645,13 +652,17 @@ void trace_samples(trace_state& state, const scene_data& scene, const scene_bvh&
   trace_rows(state, scene, bvh, context, params, count, nullptr);
 }
 
-texture_data get_image(const trace_state& state) {
-  auto image   = texture_data{state.width, state.height, {}};
-  auto scale   = state.samples > 0 ? 1.0 / state.samples : 0.0;
-  image.pixels.resize(state.sums.size());
-  for (auto i = 0; i < (int)state.sums.size(); i++)
-    image.pixels[i] = vec3f(state.sums[i] * scale);
+texture_data get_image(int width, int height, const std::vector<fixed_sum3>& sums,
+    int samples) {
+  auto image = texture_data{width, height, {}};
+  auto scale = samples > 0 ? 1.0 / samples : 0.0;
+  image.pixels.resize(sums.size());
+  for (size_t i = 0; i < sums.size(); i++)
+    image.pixels[i] = vec3f(fixed_to_double(sums[i]) * scale);
   return image;
+}
+texture_data get_image(const trace_state& state) {
+  return get_image(state.width, state.height, state.sums, state.samples);
 }
 
 }  // namespace yocto

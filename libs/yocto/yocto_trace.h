@@ -96,11 +96,16 @@ trace_context make_trace_context(const scene_data& scene, const trace_params& pa
 namespace yocto {
 
 // The image being rendered: sums of samples per pixel and counters.
+// The render so far: samples first ... first + samples - 1 of every pixel,
+// summed exactly (fixed_sum3), so that the sums of disjoint sample ranges,
+// added in any order, equal the sums of one render of their union: the
+// image of a render split across machines has the same bits.
 struct trace_state {
   int                        width   = 0;
   int                        height  = 0;
+  int                        first   = 0;  // index of the first sample
   int                        samples = 0;  // samples per pixel done so far
-  std::vector<glm::dvec3>    sums    = {};
+  std::vector<fixed_sum3>    sums    = {};
   std::atomic<int64_t>       rays    = 0;  // rays cast (camera, bounce, shadow)
   std::atomic<int64_t>       nonfinite = 0;  // samples dropped as NaN or Inf
 };
@@ -114,15 +119,21 @@ bool check_trace_params(const scene_data& scene, const trace_params& params,
 // check it against their memory budget before init_trace_state.
 double trace_image_bytes(const scene_data& scene, const trace_params& params);
 
-void init_trace_state(trace_state& state, const scene_data& scene, const trace_params& params);
+// Empty sums for the camera's image; the samples will start at `first`.
+void init_trace_state(trace_state& state, const scene_data& scene, const trace_params& params,
+    int first = 0);
 
-// Adds `count` samples to every pixel (samples state.samples ... + count - 1),
-// using params.threads threads.
+// Adds `count` samples to every pixel (samples first + samples ... + count
+// - 1), using params.threads threads. A sample with a NaN or Inf component,
+// or one of fixed_sum_max_sample or more, is dropped and counted.
 void trace_samples(trace_state& state, const scene_data& scene, const scene_bvh& bvh,
     const trace_context& context, const trace_params& params, int count);
 
 // The current estimate: sums over samples.
 texture_data get_image(const trace_state& state);
+// The same for sums of `samples` samples a pixel (what a merge of parts has).
+texture_data get_image(int width, int height, const std::vector<fixed_sum3>& sums,
+    int samples);
 
 // Radiance of one path from a camera ray (exposed for tests).
 vec3f trace_radiance(const scene_data& scene, const scene_bvh& bvh,
@@ -143,7 +154,7 @@ struct trace_ray {
   bool  any_hit = false;
 };
 
-// Renders samples state.samples ... + count - 1 as trace_samples does and
+// Renders the next `count` samples as trace_samples does and
 // returns every ray cast, in pixel order (the same list at any thread count).
 std::vector<trace_ray> record_trace_rays(trace_state& state, const scene_data& scene,
     const scene_bvh& bvh, const trace_context& context, const trace_params& params,
