@@ -6,13 +6,16 @@
 #ifndef TESTS_RUN_YSCENE_H_
 #define TESTS_RUN_YSCENE_H_
 
+#include <gtest/gtest.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
 #include <cstdio>
 #include <functional>
+#include <sstream>
 #include <string>
 #include <vector>
+#include <yocto/yocto_scene.h>
 
 struct command_result {
   int         status = -1;  // exit status, -1 if ended by a signal
@@ -64,6 +67,46 @@ inline command_result run_yscene_in_child(
   if (WIFEXITED(status)) result.status = WEXITSTATUS(status);
   if (WIFSIGNALED(status)) result.signal = WTERMSIG(status);
   return result;
+}
+
+// Exit status 1 and exactly one error line, which names `names`.
+inline void expect_failure(const command_result& result, const std::string& names) {
+  EXPECT_EQ(result.status, 1) << result.output;
+  auto error_lines = 0;
+  auto stream      = std::istringstream(result.output);
+  for (auto line = std::string{}; std::getline(stream, line);) {
+    if (line.find("error") != std::string::npos) {
+      error_lines++;
+      EXPECT_EQ(line.rfind("error: ", 0), 0u) << line;
+      EXPECT_NE(line.find(names), std::string::npos) << line;
+    }
+  }
+  EXPECT_EQ(error_lines, 1) << result.output;
+}
+
+// A tiny valid scene: `shapes` matte spheres (sphere0, sphere1, ...) under
+// a constant sky, seen by one camera.
+inline yocto::scene_data make_small_scene(int shapes = 1) {
+  using namespace yocto;
+  auto scene   = scene_data{};
+  auto camera  = camera_data{};
+  camera.frame = lookat_frame({0, 0, 4}, {0, 0, 0}, {0, 1, 0});
+  scene.cameras.push_back(camera);
+  scene.camera_names.push_back("camera");
+  scene.environments.push_back({identity3x4f, {1, 1, 1}, -1});
+  scene.environment_names.push_back("sky");
+  auto material  = material_data{};
+  material.type  = material_type::matte;
+  material.color = {0.5f, 0.5f, 0.5f};
+  scene.materials.push_back(material);
+  scene.material_names.push_back("grey");
+  for (auto i = 0; i < shapes; i++) {
+    scene.shapes.push_back(make_sphere_shape(16 + 8 * i, 1));
+    scene.shape_names.push_back("sphere" + std::to_string(i));
+    scene.instances.push_back({identity3x4f, i, 0});
+    scene.instance_names.push_back("sphere" + std::to_string(i));
+  }
+  return scene;
 }
 
 #endif

@@ -115,30 +115,6 @@ static texture_data make_noise_image(int width, int height) {
   return image;
 }
 
-// A small valid scene: a matte sphere under a constant sky, with `shapes`
-// copies of the sphere (each its own PLY when saved).
-static scene_data make_small_scene(int shapes = 1) {
-  auto scene   = scene_data{};
-  auto camera  = camera_data{};
-  camera.frame = lookat_frame({0, 0, 4}, {0, 0, 0}, {0, 1, 0});
-  scene.cameras.push_back(camera);
-  scene.camera_names.push_back("camera");
-  scene.environments.push_back({identity3x4f, {1, 1, 1}, -1});
-  scene.environment_names.push_back("sky");
-  auto material  = material_data{};
-  material.type  = material_type::matte;
-  material.color = {0.5f, 0.5f, 0.5f};
-  scene.materials.push_back(material);
-  scene.material_names.push_back("grey");
-  for (auto i = 0; i < shapes; i++) {
-    scene.shapes.push_back(make_sphere_shape(16 + 8 * i, 1));
-    scene.shape_names.push_back("sphere" + std::to_string(i));
-    scene.instances.push_back({identity3x4f, i, 0});
-    scene.instance_names.push_back("sphere" + std::to_string(i));
-  }
-  return scene;
-}
-
 // The child side of run_save_in_child: before the tests start, a process
 // started with YOCTO_SAVE_IN_CHILD=WHAT:LIMIT:FILENAME saves a noisy 96x96
 // image (27 KB as 8-bit, 110 KB as float; WHAT is its extension), a PLY
