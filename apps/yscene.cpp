@@ -216,7 +216,7 @@ static int run_raycast(const render_options& options, const scene_data& scene,
 
 // Checks before any work that the output can be written: its folder takes a
 // new file, the name is not a folder, the disk holds the image (12 bytes a
-// pixel, the float formats' size, bounds every format) and JPEG's largest
+// pixel, the float formats' size, bounds every image format) and JPEG's largest
 // side is not exceeded.
 static bool check_render_output(
     const render_options& options, const trace_params& params, std::string& error) {
@@ -227,7 +227,9 @@ static bool check_render_output(
             std::to_string(params.resolution) + ")";
     return false;
   }
-  return check_output_file(options.output, side * side * 12 + 65536, error);
+  // A part holds 84 bytes a pixel before compression (see save_render_part).
+  auto pixel_bytes = options.sample_range.empty() ? 12 : 84;
+  return check_output_file(options.output, side * side * pixel_bytes + 65536, error);
 }
 
 // After a failed save, writes the render as STEM-rescued.exr next to the
@@ -559,7 +561,7 @@ static int run_merge(const merge_options& options) {
     if (!load_render_part(filename, part, error)) return print_error(error);
     if (ranges.empty()) {
       // Fail before the work if the output cannot be written.
-      auto bytes = (double)part.width * part.height * (options.part ? 100 : 12) + 65536;
+      auto bytes = (double)part.width * part.height * (options.part ? 84 : 12) + 65536;
       if (!check_output_file(output, bytes, error)) return print_error(error);
       merged.settings = part.settings;
       merged.samples  = part.samples;

@@ -41,8 +41,10 @@ usage. The image is written by yscene merge, atomically: complete or absent.
 
 import argparse
 import hashlib
+import logging
 import os
 import shutil
+import signal
 import subprocess
 import sys
 import tempfile
@@ -52,6 +54,12 @@ import time
 # Set before the import so the config, and the worker processes started
 # from it, inherit it.
 os.environ.setdefault("DASK_LOGGING__DISTRIBUTED", "warning")
+
+# The LocalCluster's worker processes are spawned: each imports this file as
+# __mp_main__ first. A Ctrl-C in the terminal reaches them too; they ignore
+# it (else each prints a traceback), the client shuts them down instead.
+if __name__ == "__mp_main__":
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
@@ -83,6 +91,8 @@ def render_part(yscene, scene, samples, start, stop, threads, extra):
     import subprocess
     import tempfile
 
+    import distributed
+
     # The child must not outlive the worker (killed, or its nanny restarting
     # it): the kernel sends it SIGKILL when its parent dies. libc is loaded
     # here, before the fork: the child should call nothing but prctl.
@@ -99,7 +109,14 @@ def render_part(yscene, scene, samples, start, stop, threads, extra):
     host = socket.gethostname()
     if not os.access(yscene, os.X_OK):
         raise RuntimeError(f"{yscene}: no such executable on host {host}")
-    workdir = tempfile.mkdtemp(prefix="yscene-part-")
+    # In the worker's own folder: if the worker is killed before the finally
+    # below runs, Dask removes the folder with the worker's (at once when
+    # the worker closes, or as a stale folder when the next one starts).
+    try:
+        base = distributed.get_worker().local_directory
+    except ValueError:  # not on a worker
+        base = None
+    workdir = tempfile.mkdtemp(prefix="yscene-part-", dir=base)
     try:
         part = os.path.join(workdir, "part.exr")
         command = [yscene, "render", scene, *extra, "--output", part, "--samples", str(samples),
@@ -209,28 +226,22 @@ def check_arguments(args, extra):
     return os.path.abspath(yscene)
 
 
-def merge_parts(yscene, parts, output, exposure):
-    """Adds up the parts (name -> bytes) with yscene merge into output."""
-    with tempfile.TemporaryDirectory(prefix="farm-merge-") as folder:
-        names = []
-        for name, data in parts.items():
-            names.append(os.path.join(folder, name))
-            with open(names[-1], "wb") as file:
-                file.write(data)
-        command = [yscene, "merge", *names, "--output", output, "--quiet"]
-        if exposure is not None:
-            command += ["--exposure", str(exposure)]
-        result = subprocess.run(command, stdin=subprocess.DEVNULL, capture_output=True,
-                                text=True, errors="replace")
-        if result.returncode != 0:
-            lines = [line.strip() for line in result.stderr.splitlines() if line.strip()]
-            message = " | ".join(line.removeprefix("error: ") for line in lines[-3:])
-            raise FarmError(f"yscene merge failed: {message or f'exit status {result.returncode}'}")
+def merge_parts(yscene, names, output, exposure):
+    """Adds up the part files with yscene merge into output."""
+    command = [yscene, "merge", *names, "--output", output, "--quiet"]
+    if exposure is not None:
+        command += ["--exposure", str(exposure)]
+    result = subprocess.run(command, stdin=subprocess.DEVNULL, capture_output=True, text=True,
+                            errors="replace")
+    if result.returncode != 0:
+        lines = [line.strip() for line in result.stderr.splitlines() if line.strip()]
+        message = " | ".join(line.removeprefix("error: ") for line in lines[-3:])
+        raise FarmError(f"yscene merge failed: {message or f'exit status {result.returncode}'}")
 
 
 def render_on(client, args, extra, yscene, scene):
-    """Submits the parts, collects them as they finish (with progress) and
-    merges them. Returns the number of workers that were present."""
+    """Submits the parts, saves them as they come back (with progress) and
+    merges them into the output."""
     from distributed import as_completed
 
     ranges = split_samples(args.samples, args.parts)
@@ -244,24 +255,30 @@ def render_on(client, args, extra, yscene, scene):
     show = not args.quiet
     if show:
         print_progress(0, len(ranges), started)
-    parts = {}
-    try:
-        for future in as_completed(futures):
-            start, stop = futures.pop(future)
-            try:
-                data = future.result()
-            except Exception as error:
-                raise FarmError(f"part {start}:{stop}: " + " ".join(str(error).split())) from None
-            parts[f"part-{start:09d}-{stop:09d}.exr"] = data
+    with tempfile.TemporaryDirectory(prefix="farm-parts-") as folder:
+        names = []
+        try:
+            for future in as_completed(futures):
+                start, stop = futures.pop(future)
+                try:
+                    data = future.result()
+                except Exception as error:
+                    message = " ".join(str(error).split()) or type(error).__name__
+                    raise FarmError(f"part {start}:{stop}: {message}") from None
+                # To disk at once: the client holds one part at a time.
+                names.append(os.path.join(folder, f"part-{start}-{stop}.exr"))
+                with open(names[-1], "wb") as file:
+                    file.write(data)
+                del future, data
+                if show:
+                    print_progress(len(names), len(ranges), started)
+        finally:
             if show:
-                print_progress(len(parts), len(ranges), started)
-    finally:
-        if show:
-            print(file=sys.stderr)
-        # Running parts are not stopped by a cancel on a shared cluster, but
-        # no new ones start; a LocalCluster's close ends them all.
-        client.cancel(list(futures))
-    merge_parts(yscene, parts, args.output, args.exposure)
+                print(file=sys.stderr)
+            # On a shared cluster, a cancel keeps parts from starting but does
+            # not stop running ones; closing a LocalCluster ends them all.
+            client.cancel(list(futures))
+        merge_parts(yscene, names, args.output, args.exposure)
 
 
 def close_quietly(thing):
@@ -275,8 +292,7 @@ def close_quietly(thing):
 def run(args, extra):
     yscene = check_arguments(args, extra)
     scene = os.path.abspath(args.scene)
-    import logging
-    import distributed
+    import distributed  # here: a second to import, not needed for the checks above
     logging.getLogger("distributed").setLevel(logging.WARNING)
 
     started = time.monotonic()
@@ -301,13 +317,15 @@ def run(args, extra):
             if args.threads is None:
                 args.threads = max(1, cores // workers)
             # One task per worker process: each runs a multi-threaded yscene.
-            # No dashboard (it needs bokeh); the workers' warnings (a failed
-            # part, each retry) are left out: the error line says it all.
+            # The scheduler's HTTP server (the dashboard, if bokeh is there)
+            # on any free port: 8787 may be taken, by a `dask scheduler` say.
+            # The workers' warnings (a failed part, each retry) are left out:
+            # the error line says it all.
             cluster = distributed.LocalCluster(n_workers=workers, threads_per_worker=1,
-                                               processes=True, dashboard_address=None,
+                                               processes=True, dashboard_address=":0",
                                                silence_logs=logging.ERROR)
             client = distributed.Client(cluster)
-            where = f"{workers} local workers"
+            where = f"{workers} local worker(s)"
         render_on(client, args, extra, yscene, scene)
     finally:
         if client is not None:
@@ -315,7 +333,7 @@ def run(args, extra):
         if cluster is not None:
             close_quietly(cluster)
     if not args.quiet:
-        print(f"farm: rendered {args.output}: {args.samples} samples in {args.parts} parts "
+        print(f"farm: rendered {args.output}: {args.samples} samples in {args.parts} part(s) "
               f"on {where} (yscene --threads {args.threads}) in "
               f"{time.monotonic() - started:.1f}s")
 

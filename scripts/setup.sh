@@ -1,13 +1,14 @@
 #!/usr/bin/env bash
 # Installs the Debian 12 packages yocto-hair needs, only those missing, then
-# configures and builds (Release) into build/. With --fuzz, also clang-14
+# configures and builds (Release) into build/. python3-distributed is Dask,
+# for scripts/farm.py and its test. With --fuzz, also clang-14
 # and libFuzzer, which scripts/fuzz.sh needs.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
 packages="cmake ninja-build g++ pkg-config libembree-dev libopenimageio-dev
   openimageio-tools libglm-dev nlohmann-json3-dev libtbb-dev libcli11-dev libgtest-dev
-  libbenchmark-dev zlib1g-dev"
+  libbenchmark-dev zlib1g-dev python3-distributed"
 if [ "${1:-}" = --fuzz ]; then
   packages="$packages clang-14 libclang-rt-14-dev libfuzzer-14-dev"
 fi

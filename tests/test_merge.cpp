@@ -106,6 +106,31 @@ TEST(merge, fixed_sums_are_exact) {
   EXPECT_GT(fixed_to_double(doubled).x, 0x1p126);
 }
 
+// The fast path of add_fixed (128-bit, below 2^63) adds what the general
+// one does, for every exponent and sign, from accumulators near every carry.
+TEST(merge, fixed_sum_fast_path_matches_the_general_one) {
+  auto rng = make_rng(5);
+  for (auto i = 0; i < 200000; i++) {
+    auto bits = (uint32_t)advance_rng(rng);
+    auto x    = 0.0f;
+    std::memcpy(&x, &bits, sizeof(x));
+    if (!std::isfinite(x) || std::abs(x) >= fixed_sum_max_sample) continue;
+    uint64_t fast[3], general[3], value[3];
+    for (auto k = 0; k < 3; k++) {
+      // Words near 0 or all ones, so that carries and borrows run through.
+      auto kind = rand1i(rng, 3);
+      fast[k]   = kind == 0 ? advance_rng(rng) : kind == 1 ? ~(uint64_t)rand1i(rng, 4)
+                                                           : (uint64_t)rand1i(rng, 4);
+      general[k] = fast[k];
+    }
+    add_fixed_float(fast, x);
+    float_to_fixed_words(x, value);
+    add_fixed_words(general, value);
+    ASSERT_TRUE(fast[0] == general[0] && fast[1] == general[1] && fast[2] == general[2])
+        << "x = " << x;
+  }
+}
+
 // The tracer accumulates exactly: 5 samples rendered at once equal 2 then
 // 3 rendered as separate states and added up.
 TEST(merge, trace_states_of_ranges_add_up_to_one_render) {
