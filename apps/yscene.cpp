@@ -304,9 +304,10 @@ static std::string render_settings(const scene_data& scene, const trace_params& 
                                         ? " " + std::to_string(options.segments) : "") +
                      (options.flat_curves ? " flat" : " round") + " pieces " +
                      std::to_string(options.curve_pieces));
+  // Of Embree's configuration, only the instruction set changes a bit.
+  line("isa", embree_isa(options.embree_config));
   line("bvh", options.bvh_quality + (options.no_flatten ? " instances" : " flatten") +
-                  (options.bvh_compact ? " compact" : "") +
-                  (options.embree_config.empty() ? "" : " config " + options.embree_config));
+                  (options.bvh_compact ? " compact" : ""));
   return text;
 }
 
@@ -576,9 +577,13 @@ static int run_merge(const merge_options& options) {
                          std::to_string(merged.samples) + "-sample one");
     if (part.settings != merged.settings) {
       auto [here, there] = first_difference(part.settings, merged.settings);
+      auto hint = here.rfind("isa=", 0) == 0
+                      ? "; machines with different CPUs agree when every part gets the same "
+                        "--embree-config max_isa=NAME"
+                      : "";
       return print_error(filename + ": not a part of the render of " + reference + ": " + here +
                          " here, " + there + " there (parts of one render share the scene "
-                         "and every setting)");
+                         "and every setting" + hint + ")");
     }
     if (part.width != merged.width || part.height != merged.height ||
         part.sums.size() != merged.sums.size())

@@ -375,6 +375,14 @@ TEST(merge, parts_that_do_not_make_one_render_are_refused) {
     expect_refused({low, other}, fs::path(other).filename().string() + ": not a part of the render of");
     fs::remove(other);
   }
+  // Another instruction set for Embree's kernels (as on another CPU): the
+  // bits differ, so the merge refuses and says how to make them agree.
+  if (embree_isa("") != "sse2") {
+    auto other = render_part_file(fixture, 5, 14, 2, " --embree-config max_isa=sse2");
+    expect_refused({low, other}, "isa=sse2 here");
+    expect_refused({low, other}, "--embree-config max_isa=NAME");
+    fs::remove(other);
+  }
   // Another N, and another scene (more strands) under the same settings.
   auto result = run_yscene("render " + fixture.scene + " -o " +
                            (fixture.dir / "n15.exr").string() +

@@ -6,9 +6,13 @@
 
 #include <embree3/rtcore.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <mutex>
+#include <sstream>
+#include <string>
+#include <vector>
 
 // -----------------------------------------------------------------------------
 // EMBREE DEVICE
@@ -237,6 +241,35 @@ static RTCScene make_shape_scene(RTCDevice device, const shape_data& shape,
 // SCENE BVH
 // -----------------------------------------------------------------------------
 namespace yocto {
+
+std::string embree_isa(const std::string& config) {
+  static const auto names = std::vector<std::string>{"sse2", "sse4.2", "avx", "avx2", "avx512"};
+  // The CPU's best, as Embree tests it (AVX2 with FMA and BMI2; AVX-512 as
+  // in Skylake-X: F, DQ, CD, BW, VL).
+  auto best = 0;
+  if (__builtin_cpu_supports("sse4.2")) best = 1;
+  if (best == 1 && __builtin_cpu_supports("avx")) best = 2;
+  if (best == 2 && __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma") &&
+      __builtin_cpu_supports("bmi2"))
+    best = 3;
+  if (best == 3 && __builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512dq") &&
+      __builtin_cpu_supports("avx512cd") && __builtin_cpu_supports("avx512bw") &&
+      __builtin_cpu_supports("avx512vl"))
+    best = 4;
+  // "key=value" items separated by commas; avx512skx is avx512's old name.
+  auto stream = std::istringstream(config);
+  for (auto item = std::string{}; std::getline(stream, item, ',');) {
+    auto equal = item.find('=');
+    if (equal == std::string::npos) continue;
+    auto key = item.substr(0, equal), value = item.substr(equal + 1);
+    key.erase(0, key.find_first_not_of(' '));
+    if (key != "isa" && key != "max_isa") continue;
+    if (value.rfind("avx512", 0) == 0) value = "avx512";
+    auto found = std::find(names.begin(), names.end(), value);
+    if (found != names.end()) best = std::min(best, (int)(found - names.begin()));
+  }
+  return names[best];
+}
 
 bool make_scene_bvh(scene_bvh& bvh, const scene_data& scene, const bvh_params& params,
     std::string& error) {

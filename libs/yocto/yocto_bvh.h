@@ -76,6 +76,13 @@ struct scene_intersection {
 bool make_scene_bvh(scene_bvh& bvh, const scene_data& scene, const bvh_params& params,
     std::string& error);
 
+// The instruction set of Embree's kernels for a device configuration: the
+// best one this CPU has (sse2, sse4.2, avx, avx2, avx512), capped by an
+// `isa=` or `max_isa=` in `config` (Embree's own keys). Kernels of different
+// instruction sets round curve hits differently, so renders that must agree
+// bit for bit (the parts of one image) record and compare it.
+std::string embree_isa(const std::string& config);
+
 // Can Embree trace the ray? Origin and direction components within Embree's
 // range (it asserts beyond 1.844e18), a non-zero direction, tmin and tmax not
 // NaN. The queries below treat any other ray as a miss (as occluded for
