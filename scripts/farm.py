@@ -121,11 +121,13 @@ def render_part(yscene, scene, samples, start, stop, threads, extra):
         part = os.path.join(workdir, "part.exr")
         command = [yscene, "render", scene, *extra, "--output", part, "--samples", str(samples),
                    "--sample-range", f"{start}:{stop}", "--threads", str(threads), "--quiet"]
-        # A session of its own: a Ctrl-C in the worker's terminal would make
-        # yscene save the samples done so far and succeed with a short part.
+        # A process group of its own: a Ctrl-C in the worker's terminal would
+        # make yscene save the samples done so far and succeed with a short
+        # part. Not a session of its own: Linux's autogroup scheduling would
+        # then give each yscene the CPU share of a whole login session.
         result = subprocess.run(command, stdin=subprocess.DEVNULL, capture_output=True,
                                 text=True, errors="replace", preexec_fn=die_with_parent,
-                                start_new_session=True)
+                                process_group=0)
         lines = [line.strip() for line in result.stderr.splitlines() if line.strip()]
         if result.returncode != 0:
             errors = [line for line in lines if line.startswith("error:")] or lines[-3:]
