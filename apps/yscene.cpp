@@ -519,22 +519,27 @@ struct merge_options {
   bool                     quiet    = false;
 };
 
-// The first line of settings a that b does not have, and b's line with the
-// same key ("" if none).
+// The first setting (a "key=value" line) in which a and b differ: a's line
+// and b's line with that key, "(no KEY)" where one lacks it.
 static std::pair<std::string, std::string> first_difference(
     const std::string& a, const std::string& b) {
   auto lines = [](const std::string& text) {
-    auto result = std::vector<std::string>{};
+    auto result = std::vector<std::pair<std::string, std::string>>{};  // key, line
     auto stream = std::istringstream(text);
-    for (auto line = std::string{}; std::getline(stream, line);) result.push_back(line);
+    for (auto line = std::string{}; std::getline(stream, line);)
+      result.push_back({line.substr(0, line.find('=')), line});
     return result;
   };
   auto lines_a = lines(a), lines_b = lines(b);
-  for (auto i = 0; i < (int)std::max(lines_a.size(), lines_b.size()); i++) {
-    auto line_a = i < (int)lines_a.size() ? lines_a[i] : std::string{"(nothing)"};
-    auto line_b = i < (int)lines_b.size() ? lines_b[i] : std::string{"(nothing)"};
-    if (line_a != line_b) return {line_a, line_b};
-  }
+  auto find    = [](const auto& lines, const std::string& key) {
+    for (auto& [other, line] : lines)
+      if (other == key) return line;
+    return "(no " + key + ")";
+  };
+  for (auto& [key, line] : lines_a)
+    if (find(lines_b, key) != line) return {line, find(lines_b, key)};
+  for (auto& [key, line] : lines_b)
+    if (find(lines_a, key) != line) return {find(lines_a, key), line};
   return {"", ""};
 }
 
