@@ -489,20 +489,30 @@ static int run_render(const render_options& options, trace_params params,
                             std::to_string(first + state.samples) + " of " +
                             std::to_string(params.samples) + ")"
                          : options.output;
-  std::printf("rendered %s: %dx%d, %d spp in %.2fs (%s samples/s, %s rays/s, peak memory %s bytes)\n",
-      what.c_str(), state.width, state.height, state.samples, render_time,
-      format_count(samples / render_time).c_str(),
-      format_count((double)state.rays / render_time).c_str(),
-      format_count((double)peak_memory()).c_str());
+  if (!options.quiet) {
+    std::printf(
+        "rendered %s: %dx%d, %d spp in %.2fs (%s samples/s, %s rays/s, peak memory %s bytes)\n",
+        what.c_str(), state.width, state.height, state.samples, render_time,
+        format_count(samples / render_time).c_str(),
+        format_count((double)state.rays / render_time).c_str(),
+        format_count((double)peak_memory()).c_str());
+    // Clamping biases the image: say by how much.
+    if (params.clamp > 0)
+      std::printf("clamp %g: %lld of %s samples clamped, removing %.3g%% of their energy "
+                  "(--clamp 0 for none)\n",
+          params.clamp, (long long)state.clamped.load(), format_count(samples).c_str(),
+          100 * clamped_energy_fraction(state));
+  }
   if (options.stats) {
     auto segments = (size_t)0;
     for (auto& shape : scene.shapes) segments += shape.lines.size() + shape.curves.size();
     std::printf("stats load_seconds=%.6f bvh_seconds=%.6f bvh_bytes=%lld segments=%zu "
                 "width=%d height=%d spp=%d render_seconds=%.6f render_cpu=%.6f rays=%lld "
-                "peak_memory=%lld\n",
+                "peak_memory=%lld clamped=%lld clamped_energy=%.6g\n",
         load_time, bvh.build_seconds, (long long)bvh.peak_memory, segments, state.width,
         state.height, state.samples, render_time, render_cpu, (long long)state.rays.load(),
-        (long long)peak_memory());
+        (long long)peak_memory(), (long long)state.clamped.load(),
+        clamped_energy_fraction(state));
   }
   return 0;
 }
@@ -648,9 +658,64 @@ static int run_merge(const merge_options& options) {
 // INFO
 // -----------------------------------------------------------------------------
 
-static int run_info(const std::string& filename) {
-  auto scene = scene_data{};
-  auto error = std::string{};
+// What `info` says about a scene: the counts, and every camera, material
+// (with the values the renderer uses), environment and light, as text or
+// as json.
+struct info_options {
+  std::string scene = "";
+  bool        json  = false;
+};
+
+static std::string json_number(double value) {
+  if (!std::isfinite(value)) return "null";
+  char buffer[64];
+  std::snprintf(buffer, sizeof(buffer), "%.9g", value);
+  return buffer;
+}
+static std::string json_vec3(const vec3f& value) {
+  return "[" + json_number(value.x) + ", " + json_number(value.y) + ", " +
+         json_number(value.z) + "]";
+}
+static std::string json_string(const std::string& text) {
+  auto result = std::string{"\""};
+  for (auto character : text) {
+    if (character == '"' || character == '\\') {
+      result += '\\';
+      result += character;
+    } else if ((unsigned char)character < 0x20) {
+      char buffer[8];
+      std::snprintf(buffer, sizeof(buffer), "\\u%04x", character);
+      result += buffer;
+    } else {
+      result += character;
+    }
+  }
+  return result + "\"";
+}
+
+// A name from a names array, or "#index" when the array lacks it.
+static std::string element_name(const std::vector<std::string>& names, int index) {
+  return index >= 0 && index < (int)names.size() && !names[index].empty()
+             ? names[index]
+             : "#" + std::to_string(index);
+}
+
+// A perspective camera's field of view across and down the image, in degrees.
+static vec2f camera_fov(const camera_data& camera) {
+  auto film = camera_film_size(camera);
+  return {degrees(2 * std::atan(film.x / (2 * camera.lens))),
+      degrees(2 * std::atan(film.y / (2 * camera.lens)))};
+}
+
+// Where a hair material's absorption comes from (pbrt's precedence).
+static std::string hair_sigma_a_source(const hair_material& hair) {
+  return hair.has_sigma_a ? "sigma_a" : hair.has_color ? "color" : "melanin";
+}
+
+static int run_info(const info_options& options) {
+  auto& filename = options.scene;
+  auto  scene    = scene_data{};
+  auto  error    = std::string{};
   if (!load_any_scene(filename, scene, error, {})) return print_error(error);
   auto triangles = (size_t)0, lines = (size_t)0, curves = (size_t)0, vertices = (size_t)0;
   auto bytes = (size_t)0;
@@ -663,9 +728,104 @@ static int run_info(const std::string& filename) {
   }
   for (auto& texture : scene.textures) bytes += texture.pixels.size() * sizeof(vec3f);
   auto bounds = compute_bounds(scene);
+  // The resolution a render would use: the scene's, else render's default.
+  auto resolution = scene.settings.resolution > 0 ? scene.settings.resolution
+                                                  : trace_params{}.resolution;
+  auto texture_text = [&](int texture) {
+    if (texture < 0) return std::string{"none"};
+    auto& data = scene.textures[texture];
+    return element_name(scene.texture_names, texture) + " (" + std::to_string(data.width) + "x" +
+           std::to_string(data.height) + ")";
+  };
+
+  if (options.json) {
+    auto out = std::string{"{\n"};
+    out += "  \"scene\": " + json_string(filename) + ",\n";
+    out += "  \"counts\": {\"cameras\": " + std::to_string(scene.cameras.size()) +
+           ", \"environments\": " + std::to_string(scene.environments.size()) +
+           ", \"distant_lights\": " + std::to_string(scene.distant_lights.size()) +
+           ", \"shapes\": " + std::to_string(scene.shapes.size()) +
+           ", \"instances\": " + std::to_string(scene.instances.size()) +
+           ", \"materials\": " + std::to_string(scene.materials.size()) +
+           ", \"textures\": " + std::to_string(scene.textures.size()) +
+           ", \"vertices\": " + std::to_string(vertices) +
+           ", \"triangles\": " + std::to_string(triangles) +
+           ", \"lines\": " + std::to_string(lines) + ", \"curves\": " + std::to_string(curves) +
+           "},\n";
+    out += "  \"memory\": " + std::to_string(bytes) + ",\n";
+    out += "  \"bounds\": " +
+           (empty(bounds) ? std::string{"null"}
+                          : "[" + json_vec3(bounds.min) + ", " + json_vec3(bounds.max) + "]") +
+           ",\n";
+    out += "  \"cameras\": [";
+    for (auto i = 0; i < (int)scene.cameras.size(); i++) {
+      auto& camera = scene.cameras[i];
+      auto  size   = camera_resolution(camera, resolution);
+      auto  fov    = camera_fov(camera);
+      out += std::string(i ? "," : "") + "\n    {\"name\": " +
+             json_string(element_name(scene.camera_names, i)) +
+             ", \"position\": " + json_vec3(camera.frame.o) +
+             ", \"direction\": " + json_vec3(-camera.frame.z) + ", \"up\": " +
+             json_vec3(camera.frame.y) + ", \"orthographic\": " +
+             (camera.orthographic ? "true" : "false") + ", \"lens\": " +
+             json_number(camera.lens) + ", \"film\": " + json_number(camera.film) +
+             ", \"fov_degrees\": [" + json_number(fov.x) + ", " + json_number(fov.y) +
+             "], \"aspect\": " + json_number(camera.aspect) + ", \"focus\": " +
+             json_number(camera.focus) + ", \"aperture\": " + json_number(camera.aperture) +
+             ", \"resolution\": [" + std::to_string(size.x) + ", " + std::to_string(size.y) +
+             "]}";
+    }
+    out += "\n  ],\n  \"materials\": [";
+    for (auto i = 0; i < (int)scene.materials.size(); i++) {
+      auto& material = scene.materials[i];
+      out += std::string(i ? "," : "") + "\n    {\"name\": " +
+             json_string(element_name(scene.material_names, i)) + ", \"type\": " +
+             json_string(material_type_names[(int)material.type]) + ", \"emission\": " +
+             json_vec3(material.emission) + ", \"emission_tex\": " +
+             json_string(texture_text(material.emission_tex));
+      if (material.type == material_type::hair) {
+        auto& hair = material.hair;
+        auto  used = make_hair_precomputed(hair);
+        out += ", \"sigma_a\": " + json_vec3(used.sigma_a) + ", \"sigma_a_from\": " +
+               json_string(hair_sigma_a_source(hair)) + ", \"eumelanin\": " +
+               json_number(hair.eumelanin) + ", \"pheomelanin\": " +
+               json_number(hair.pheomelanin) + ", \"color\": " + json_vec3(hair.color) +
+               ", \"beta_m\": " + json_number(hair.beta_m) + ", \"beta_n\": " +
+               json_number(hair.beta_n) + ", \"alpha\": " + json_number(hair.alpha) +
+               ", \"eta\": " + json_number(hair.eta);
+      } else {
+        out += ", \"color\": " + json_vec3(material.color) + ", \"color_tex\": " +
+               json_string(texture_text(material.color_tex));
+        if (material.type == material_type::glossy)
+          out += ", \"roughness\": " + json_number(material.roughness) + ", \"ior\": " +
+                 json_number(material.ior);
+      }
+      out += "}";
+    }
+    out += "\n  ],\n  \"environments\": [";
+    for (auto i = 0; i < (int)scene.environments.size(); i++) {
+      auto& environment = scene.environments[i];
+      out += std::string(i ? "," : "") + "\n    {\"name\": " +
+             json_string(element_name(scene.environment_names, i)) + ", \"emission\": " +
+             json_vec3(environment.emission) + ", \"emission_tex\": " +
+             json_string(texture_text(environment.emission_tex)) + ", \"up\": " +
+             json_vec3(environment.frame.y) + "}";
+    }
+    out += "\n  ],\n  \"distant_lights\": [";
+    for (auto i = 0; i < (int)scene.distant_lights.size(); i++) {
+      auto& light = scene.distant_lights[i];
+      out += std::string(i ? "," : "") + "\n    {\"direction\": " + json_vec3(light.direction) +
+             ", \"emission\": " + json_vec3(light.emission) + "}";
+    }
+    out += "\n  ]\n}\n";
+    std::fputs(out.c_str(), stdout);
+    return 0;
+  }
+
   std::printf("scene:        %s\n", filename.c_str());
   std::printf("cameras:      %zu\n", scene.cameras.size());
   std::printf("environments: %zu\n", scene.environments.size());
+  std::printf("distant lights: %zu\n", scene.distant_lights.size());
   std::printf("shapes:       %zu\n", scene.shapes.size());
   std::printf("instances:    %zu\n", scene.instances.size());
   std::printf("materials:    %zu\n", scene.materials.size());
@@ -680,6 +840,69 @@ static int run_info(const std::string& filename) {
   } else {
     std::printf("bounds:       empty\n");
   }
+  for (auto i = 0; i < (int)scene.cameras.size(); i++) {
+    auto& camera = scene.cameras[i];
+    auto  size   = camera_resolution(camera, resolution);
+    auto  fov    = camera_fov(camera);
+    // + 0 turns -0 into 0.
+    auto  o = camera.frame.o + vec3f{0, 0, 0}, d = -camera.frame.z + vec3f{0, 0, 0};
+    std::printf("camera %s: %s at [%g %g %g] looking [%g %g %g], lens %g mm, film %g mm, "
+                "fov %.4g x %.4g deg, aspect %g, focus %g, aperture %g, %dx%d pixels\n",
+        element_name(scene.camera_names, i).c_str(),
+        camera.orthographic ? "orthographic" : "perspective", o.x, o.y, o.z, d.x, d.y, d.z,
+        camera.lens * 1000, camera.film * 1000,
+        fov.x, fov.y, camera.aspect, camera.focus,
+        camera.aperture, size.x, size.y);
+  }
+  for (auto i = 0; i < (int)scene.materials.size(); i++) {
+    auto& material = scene.materials[i];
+    auto  name     = element_name(scene.material_names, i);
+    auto  e        = material.emission;
+    if (material.type == material_type::hair) {
+      auto& hair = material.hair;
+      auto  used = make_hair_precomputed(hair);
+      auto  from = hair_sigma_a_source(hair);
+      char source[160];
+      if (from == "sigma_a") std::snprintf(source, sizeof(source), "given");
+      else if (from == "color")
+        std::snprintf(source, sizeof(source), "from color [%g %g %g]", hair.color.x,
+            hair.color.y, hair.color.z);
+      else
+        std::snprintf(source, sizeof(source), "from melanin (eumelanin %g, pheomelanin %g)",
+            hair.eumelanin, hair.pheomelanin);
+      std::printf("material %s: hair, sigma_a [%g %g %g] %s, beta_m %g, beta_n %g, alpha %g "
+                  "deg, eta %g\n",
+          name.c_str(), used.sigma_a.x, used.sigma_a.y, used.sigma_a.z, source,
+          hair.beta_m, hair.beta_n, hair.alpha, hair.eta);
+    } else {
+      auto c = material.color;
+      std::printf("material %s: %s, color [%g %g %g]%s%s, emission [%g %g %g]%s\n",
+          name.c_str(), material_type_names[(int)material.type].c_str(), c.x, c.y, c.z,
+          material.color_tex >= 0 ? (" x " + texture_text(material.color_tex)).c_str() : "",
+          material.type == material_type::glossy
+              ? (", roughness " + std::to_string(material.roughness) + ", ior " +
+                    std::to_string(material.ior))
+                    .c_str()
+              : "",
+          e.x, e.y, e.z,
+          material.emission_tex >= 0 ? (" x " + texture_text(material.emission_tex)).c_str()
+                                     : "");
+    }
+  }
+  for (auto i = 0; i < (int)scene.environments.size(); i++) {
+    auto& environment = scene.environments[i];
+    auto  e           = environment.emission;
+    std::printf("environment %s: emission [%g %g %g]%s\n",
+        element_name(scene.environment_names, i).c_str(), e.x, e.y, e.z,
+        environment.emission_tex >= 0
+            ? (" x " + texture_text(environment.emission_tex)).c_str()
+            : "");
+  }
+  for (auto& light : scene.distant_lights) {
+    std::printf("distant light: from [%g %g %g], irradiance [%g %g %g]\n", light.direction.x,
+        light.direction.y, light.direction.z, light.emission.x, light.emission.y,
+        light.emission.z);
+  }
   return 0;
 }
 
@@ -688,7 +911,7 @@ static int run_info(const std::string& filename) {
 // -----------------------------------------------------------------------------
 
 static int run_convert(const std::string& input, const std::string& output,
-    const pbrt_params& params) {
+    const pbrt_params& params, bool quiet) {
   if (path_extension(output) != ".json")
     return print_error(output + ": the output must be a .json scene");
   auto scene = scene_data{};
@@ -706,8 +929,9 @@ static int run_convert(const std::string& input, const std::string& output,
     curves += shape.curves.size();
     lines += shape.lines.size();
   }
-  std::printf("converted %s to %s in %.2fs: %zu shapes, %zu curves, %zu lines\n",
-      input.c_str(), output.c_str(), seconds_since(start), scene.shapes.size(), curves, lines);
+  if (!quiet)
+    std::printf("converted %s to %s in %.2fs: %zu shapes, %zu curves, %zu lines\n",
+        input.c_str(), output.c_str(), seconds_since(start), scene.shapes.size(), curves, lines);
   return 0;
 }
 
@@ -724,6 +948,7 @@ struct hair_options {
   std::string        fit_camera   = "";     // scene whose first camera places the strands
   float              fit_fraction = 0.75f;  // of the image the strands span
   float              fit_distance = 0;      // 0: where the camera sees them now
+  bool               quiet        = false;  // nothing printed on success
 };
 
 // Offset of pbrt's WorldBegin in a scene's text (comments and strings
@@ -841,7 +1066,8 @@ static int run_hair(const hair_options& options, hair_style_params params,
     return print_error(
         output + ": unknown output extension (use .json, .pbrt, .pbrt.gz, .hair or .ply)");
   }
-  std::printf("generated %s: %s hair, %zu strands, %zu Bezier segments in %.2fs\n",
+  if (!options.quiet)
+    std::printf("generated %s: %s hair, %zu strands, %zu Bezier segments in %.2fs\n",
       output.c_str(), options.style.c_str(), strands, segments, seconds_since(start));
   return 0;
 }
@@ -860,7 +1086,9 @@ static int run_main(int argc, const char** argv) {
   auto lights      = std::string{"automatic"};
   auto sequence    = std::string{"sobol"};
   auto render      = app.add_subcommand("render", "render a scene to an image");
-  render->add_option("scene", render_opts.scene, "scene (json, pbrt or hair)")->required();
+  render->add_option("scene", render_opts.scene,
+      "scene: json (Yocto/GL), pbrt or pbrt.gz (pbrt-v3/v4), or hair (Cem Yuksel's strands "
+      "under a default sky and camera)")->required();
   render->add_option("--output,-o", render_opts.output, "output image (exr, hdr, pfm, png, jpg)")
       ->required();
   render->add_option("--samples,-s", params.samples, "samples per pixel");
@@ -885,13 +1113,17 @@ static int run_main(int argc, const char** argv) {
   render->add_option("--bounces,-b", params.bounces, "maximum scattering events per path (pbrt's maxdepth)");
   render->add_option("--threads,-t", params.threads, "threads (0 = all cores)");
   render->add_option("--seed", params.seed, "random seed");
-  render->add_option("--clamp", params.clamp, "clamp sample values (0 = off)");
+  render->add_option("--clamp", params.clamp,
+      "scale samples down to this largest component (0 = off, the default): fewer "
+      "fireflies, a darker (biased) image; the summary says how much it removed");
   render->add_option("--exposure,-e", render_opts.exposure, "exposure for png/jpg (stops)");
   render->add_option("--camera", render_opts.camera, "camera name");
   render->add_flag("--flat-curves", render_opts.flat_curves, "ray-facing flat fibers");
   render->add_flag("--hair-four-numbers", params.hair_four_numbers,
       "sample hair with four random numbers instead of demuxing two");
-  render->add_flag("--quiet,-q", render_opts.quiet, "no progress output");
+  render->add_flag("--quiet,-q", render_opts.quiet,
+      "print nothing on success (no progress, no summary; errors and warnings still go to "
+      "stderr, --stats and --checkpoints lines to stdout)");
   render->add_option("--curves", render_opts.curves,
           "native Bezier curves, or line segments tessellated after loading")
       ->check(CLI::IsMember({"native", "lines"}));
@@ -934,9 +1166,12 @@ static int run_main(int argc, const char** argv) {
   };
   add_max_memory(render);
 
-  auto info_scene = std::string{};
-  auto info       = app.add_subcommand("info", "print scene statistics");
-  info->add_option("scene", info_scene, "scene (json, pbrt or hair)")->required();
+  auto info_opts = info_options{};
+  auto info      = app.add_subcommand("info",
+      "print a scene's statistics, cameras, materials (with the values rendered), "
+      "environments and lights");
+  info->add_option("scene", info_opts.scene, "scene (json, pbrt, pbrt.gz or hair)")->required();
+  info->add_flag("--json", info_opts.json, "the same as json, for programs");
   add_max_memory(info);
 
   auto merge_opts = merge_options{};
@@ -956,14 +1191,18 @@ static int run_main(int argc, const char** argv) {
 
   auto convert_in = std::string{}, convert_out = std::string{}, curves_mode = std::string{"native"};
   auto pbrt       = pbrt_params{};
-  auto convert    = app.add_subcommand("convert", "convert pbrt or hair to a json scene");
-  convert->add_option("input", convert_in, "input scene (pbrt, pbrt.gz or hair)")->required();
+  auto convert_quiet = false;
+  auto convert    = app.add_subcommand("convert",
+      "convert a pbrt, hair or json scene to a json scene (shapes as ply, textures as exr)");
+  convert->add_option("input", convert_in, "input scene: pbrt, pbrt.gz, hair or json")
+      ->required();
   convert->add_option("output", convert_out, "output json scene")->required();
   convert->add_option("--curves", curves_mode, "native Bezier curves or line segments")
       ->check(CLI::IsMember({"native", "lines"}));
   convert->add_option("--segments", pbrt.segments, "line segments per curve")
       ->check(CLI::Range(1, 64));
   convert->add_flag("--lenient", pbrt.lenient, "unknown pbrt directives are warnings");
+  convert->add_flag("--quiet,-q", convert_quiet, "print nothing on success");
   add_max_memory(convert);
 
   auto hair_opts     = hair_options{};
@@ -982,6 +1221,7 @@ static int run_main(int argc, const char** argv) {
   hair->add_option("--output,-o", hair_opts.output,
           "json scene (with ply and sky), .pbrt, .pbrt.gz, .hair or .ply strands")
       ->required();
+  hair->add_flag("--quiet,-q", hair_opts.quiet, "print nothing on success");
   hair->add_option("--fit-camera", hair_opts.fit_camera,
       "place the strands where this scene's first camera looks (pbrt: read up to WorldBegin)");
   add_max_memory(hair);
@@ -1027,12 +1267,12 @@ static int run_main(int argc, const char** argv) {
   } else if (merge->parsed()) {
     return run_merge(merge_opts);
   } else if (info->parsed()) {
-    return run_info(info_scene);
+    return run_info(info_opts);
   } else if (hair->parsed()) {
     return run_hair(hair_opts, hair_params, hair_material_params);
   } else if (convert->parsed()) {
     pbrt.curves_as_lines = curves_mode == "lines";
-    return run_convert(convert_in, convert_out, pbrt);
+    return run_convert(convert_in, convert_out, pbrt, convert_quiet);
   }
   return 1;
 }

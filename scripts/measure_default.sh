@@ -9,7 +9,8 @@ shift || true
 [ $# -gt 0 ] || set -- --samples 16 --resolution 640
 mkdir -p out
 for run in 1 2 3; do
-  build/apps/yscene render "$scene" --output out/measure.exr --quiet "$@"
+  # Not --quiet: the summary line is what is measured (progress goes to stderr).
+  build/apps/yscene render "$scene" --output out/measure.exr "$@"
 done | tee out/measure.log
 echo "load average: $(cut -d' ' -f1-3 /proc/loadavg)"
 /usr/bin/python3 - <<'PY'

@@ -1,12 +1,16 @@
 //
 // End-to-end tests of the yscene command line: bad input gives a one-line
 // error naming the file, exit status 1 and no output; renders are complete,
-// deterministic across thread counts, and survive Ctrl-C.
+// deterministic across thread counts, and survive Ctrl-C; info, --quiet,
+// the help and --clamp tell the user the whole truth.
 //
 
 #include <gtest/gtest.h>
 #include <sys/wait.h>
 #include <yocto/yocto_sceneio.h>
+#include <yocto_hair/yocto_hair.h>
+
+#include <nlohmann/json.hpp>
 
 #include <cstdio>
 #include <filesystem>
@@ -341,4 +345,173 @@ TEST(cli, convert_generated_hair_round_trips) {
     // segment per generated segment after the Catmull-Rom fit).
     EXPECT_EQ(curves, (size_t)30 * 6) << extension;
   }
+}
+
+// A strand scene with three hair materials, one per source of sigma_a
+// (melanin, colour, sigma_a given), under a sky, seen by a named camera.
+static void write_hair_materials_scene(const fs::path& filename) {
+  auto scene = make_small_scene();
+  scene.camera_names[0] = "front";
+  scene.cameras[0].lens = 0.035f;
+  auto strands = shape_data{};
+  append_catmull_rom_strand(strands, {{-1, -1, 0}, {0, 0, 0}, {1, 1, 0}}, {0.02f, 0.01f, 0.01f});
+  scene.shapes.push_back(strands);
+  scene.shape_names.push_back("strands");
+  auto add_hair = [&](const std::string& name, const hair_material& hair) {
+    auto material = material_data{};
+    material.type = material_type::hair;
+    material.hair = hair;
+    scene.materials.push_back(material);
+    scene.material_names.push_back(name);
+    scene.instances.push_back({identity3x4f, 1, (int)scene.materials.size() - 1});
+    scene.instance_names.push_back(name);
+  };
+  auto melanin = hair_material{};
+  melanin.eumelanin = 0.3f;
+  melanin.pheomelanin = 0;
+  add_hair("blonde", melanin);
+  auto color      = hair_material{};
+  color.color     = {0.8f, 0.4f, 0.2f};
+  color.has_color = true;
+  color.beta_n    = 0.5f;
+  add_hair("coloured", color);
+  auto given        = hair_material{};
+  given.sigma_a     = {0.1f, 0.2f, 0.3f};
+  given.has_sigma_a = true;
+  given.alpha       = 3;
+  given.eta         = 1.6f;
+  add_hair("given", given);
+  auto error = std::string{};
+  ASSERT_TRUE(save_scene(filename.string(), scene, error)) << error;
+}
+
+// info names every camera and material with the values a render uses: the
+// sigma_a the hair model gets and where it came from; --json says the same.
+TEST(cli, info_prints_cameras_materials_and_lights) {
+  auto dir   = make_test_dir("info-materials");
+  auto scene = dir / "scene.json";
+  write_hair_materials_scene(scene);
+  auto result = run_yscene("info " + scene.string());
+  ASSERT_EQ(result.status, 0) << result.output;
+  auto& text = result.output;
+  EXPECT_NE(text.find("camera front: perspective at [0 0 4] looking [0 0 -1], lens 35 mm"),
+      std::string::npos) << text;
+  EXPECT_NE(text.find("720x480 pixels"), std::string::npos) << text;
+  EXPECT_NE(text.find("material grey: matte, color [0.5 0.5 0.5]"), std::string::npos) << text;
+  EXPECT_NE(text.find("material blonde: hair, sigma_a"), std::string::npos) << text;
+  EXPECT_NE(text.find("from melanin (eumelanin 0.3, pheomelanin 0)"), std::string::npos) << text;
+  EXPECT_NE(text.find("from color [0.8 0.4 0.2]"), std::string::npos) << text;
+  EXPECT_NE(text.find("material given: hair, sigma_a [0.1 0.2 0.3] given, beta_m 0.3, "
+                      "beta_n 0.3, alpha 3 deg, eta 1.6"),
+      std::string::npos) << text;
+  EXPECT_NE(text.find("environment sky: emission [1 1 1]"), std::string::npos) << text;
+
+  result = run_yscene("info --json " + scene.string());
+  ASSERT_EQ(result.status, 0) << result.output;
+  auto json = nlohmann::json::parse(result.output, nullptr, false);
+  ASSERT_FALSE(json.is_discarded()) << result.output;
+  EXPECT_EQ(json["counts"]["materials"], 4);
+  EXPECT_EQ(json["cameras"][0]["name"], "front");
+  EXPECT_EQ(json["cameras"][0]["resolution"], nlohmann::json::array({720, 480}));
+  EXPECT_NEAR(json["cameras"][0]["lens"].get<double>(), 0.035, 1e-7);
+  auto& materials = json["materials"];
+  ASSERT_EQ(materials.size(), 4u);
+  EXPECT_EQ(materials[1]["sigma_a_from"], "melanin");
+  EXPECT_EQ(materials[2]["sigma_a_from"], "color");
+  EXPECT_EQ(materials[3]["sigma_a_from"], "sigma_a");
+  // The absorption the model uses, from each source.
+  auto melanin  = hair_sigma_a_from_melanin(0.3f, 0);
+  auto coloured = hair_sigma_a_from_color({0.8f, 0.4f, 0.2f}, 0.5f);
+  for (auto c = 0; c < 3; c++) {
+    EXPECT_NEAR(materials[1]["sigma_a"][c].get<double>(), melanin[c], 1e-5);
+    EXPECT_NEAR(materials[2]["sigma_a"][c].get<double>(), coloured[c], 1e-5);
+  }
+  EXPECT_NEAR(materials[3]["sigma_a"][2].get<double>(), 0.3, 1e-7);
+  EXPECT_NEAR(materials[3]["eta"].get<double>(), 1.6, 1e-6);
+  EXPECT_EQ(json["environments"][0]["emission"], nlohmann::json::array({1, 1, 1}));
+  fs::remove_all(dir);
+}
+
+// --quiet: nothing at all on success, for every command; errors still come.
+TEST(cli, quiet_prints_nothing_on_success) {
+  auto dir   = make_test_dir("quiet");
+  auto scene = (dir / "hair" / "scene.json").string();
+  auto runs  = std::vector<std::string>{
+      "hair --style curly -n 20 -q -o " + scene,
+      "render " + scene + " -o " + (dir / "image.png").string() + " -s 2 -r 16 -q",
+      "render " + scene + " -o " + (dir / "part.exr").string() +
+          " -s 2 -r 16 -q --sample-range 0:2",
+      "merge " + (dir / "part.exr").string() + " -o " + (dir / "merged.png").string() + " -q",
+      "convert " + scene + " " + (dir / "copy" / "scene.json").string() + " -q",
+  };
+  for (auto& arguments : runs) {
+    auto result = run_yscene(arguments);
+    EXPECT_EQ(result.status, 0) << arguments << "\n" << result.output;
+    EXPECT_EQ(result.output, "") << arguments;
+  }
+  EXPECT_TRUE(fs::exists(dir / "copy" / "scene.json"));
+  expect_failure(run_yscene("render " + (dir / "none.json").string() + " -o " +
+                            (dir / "x.png").string() + " -q"),
+      "none.json");
+  fs::remove_all(dir);
+}
+
+// The help of each command names every format it takes and writes.
+TEST(cli, help_lists_every_format) {
+  auto expect_all = [](const std::string& command, const std::vector<std::string>& words) {
+    auto result = run_yscene(command + " --help");
+    EXPECT_EQ(result.status, 0) << result.output;
+    for (auto& word : words)
+      EXPECT_NE(result.output.find(word), std::string::npos) << command << ": " << word;
+  };
+  expect_all("render", {"json", "pbrt", "pbrt.gz", "hair", "exr", "hdr", "pfm", "png", "jpg",
+                           "--sample-range", "--clamp"});
+  expect_all("convert", {"pbrt", "pbrt.gz", "hair", "json", "ply"});
+  expect_all("info", {"json", "pbrt", "pbrt.gz", "hair", "--json"});
+  expect_all("merge", {"exr", "hdr", "pfm", "png", "jpg", "--part"});
+  expect_all("hair", {"json", ".pbrt", ".pbrt.gz", ".hair", ".ply"});
+  expect_all("", {"render", "merge", "info", "convert", "hair"});
+}
+
+// --clamp is off by default; when on, the summary says how many samples it
+// clamped and what share of their energy it removed. A small light of
+// radiance 200 beside a grey sphere, found by BSDF sampling alone, makes
+// fireflies.
+TEST(cli, clamp_is_off_by_default_and_reports_what_it_removes) {
+  auto dir   = make_test_dir("clamp");
+  auto scene = make_small_scene();
+  scene.environments[0].emission = {0.1f, 0.1f, 0.1f};
+  auto light     = material_data{};
+  light.emission = {200, 200, 200};
+  scene.materials.push_back(light);
+  scene.material_names.push_back("light");
+  scene.shapes.push_back(make_sphere_shape(8, 0.3f));
+  scene.shape_names.push_back("bulb");
+  scene.instances.push_back({translation_frame({1.5f, 1.5f, 1.5f}), 1, 1});
+  scene.instance_names.push_back("bulb");
+  auto error = std::string{};
+  ASSERT_TRUE(save_scene((dir / "scene.json").string(), scene, error)) << error;
+  auto render = [&](const std::string& name, const std::string& flags) {
+    auto result = run_yscene("render " + (dir / "scene.json").string() + " -o " +
+                             (dir / name).string() + " -s 8 -r 32 --sampler naive" + flags);
+    EXPECT_EQ(result.status, 0) << result.output;
+    auto image = texture_data{};
+    auto error = std::string{};
+    EXPECT_TRUE(load_image((dir / name).string(), image, error)) << error;
+    auto sum = 0.0;
+    for (auto& pixel : image.pixels) sum += pixel.x + pixel.y + pixel.z;
+    return std::pair{result.output, sum};
+  };
+  auto [plain, plain_sum]     = render("plain.exr", "");
+  auto [clamped, clamped_sum] = render("clamped.exr", " --clamp 10");
+  EXPECT_EQ(plain.find("samples clamped"), std::string::npos) << plain;
+  auto line = clamped.substr(clamped.find("clamp 10: "));
+  EXPECT_EQ(line.rfind("clamp 10: ", 0), 0u) << clamped;
+  auto count = std::stoll(line.substr(10));
+  EXPECT_GT(count, 0) << line;
+  auto removed = std::stod(line.substr(line.find("removing ") + 9));
+  EXPECT_GT(removed, 0) << line;
+  EXPECT_LT(removed, 100) << line;
+  EXPECT_LT(clamped_sum, plain_sum);
+  fs::remove_all(dir);
 }

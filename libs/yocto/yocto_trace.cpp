@@ -575,6 +575,9 @@ void init_trace_state(trace_state& state, const scene_data& scene, const trace_p
   state.first   = first;
   state.samples = 0;
   state.sums.assign((size_t)size.x * size.y, fixed_sum3{});
+  state.clamped = 0;
+  state.row_energy.assign(size.y, 0.0);
+  state.row_clamped.assign(size.y, 0.0);
   state.rays      = 0;
   state.nonfinite = 0;
 }
@@ -604,7 +607,8 @@ static void trace_rows(trace_state& state, const scene_data& scene, const scene_
     std::vector<std::vector<trace_ray>>* records) {
   auto& camera     = scene.cameras[params.camera];
   auto  render_row = [&](int j) {
-    auto rays = (int64_t)0, nonfinite = (int64_t)0;
+    auto rays = (int64_t)0, nonfinite = (int64_t)0, clamped = (int64_t)0;
+    auto energy = 0.0, clamped_energy = 0.0;
     auto record = records ? &(*records)[j] : nullptr;
     for (auto i = 0; i < state.width; i++) {
       auto pixel = j * state.width + i;
@@ -628,8 +632,13 @@ static void trace_rows(trace_state& state, const scene_data& scene, const scene_
           nonfinite++;
           continue;
         }
-        if (params.clamp > 0 && max_component(radiance) > params.clamp)
+        auto sample_energy = (double)radiance.x + radiance.y + radiance.z;
+        energy += sample_energy;
+        if (params.clamp > 0 && max_component(radiance) > params.clamp) {
           radiance *= params.clamp / max_component(radiance);
+          clamped++;
+          clamped_energy += sample_energy - ((double)radiance.x + radiance.y + radiance.z);
+        }
         // Beyond what the exact sum holds (1e29): as good as infinite.
         if (max_component(abs(radiance)) >= fixed_sum_max_sample) {
           nonfinite++;
@@ -640,6 +649,9 @@ static void trace_rows(trace_state& state, const scene_data& scene, const scene_
     }
     state.rays += rays;
     state.nonfinite += nonfinite;
+    state.clamped += clamped;
+    state.row_energy[j] += energy;
+    state.row_clamped[j] += clamped_energy;
   };
   parallel_chunks(state.height, 1, params.threads, [&](int64_t begin, int64_t end) {
     for (auto j = begin; j < end; j++) render_row((int)j);
@@ -650,6 +662,15 @@ static void trace_rows(trace_state& state, const scene_data& scene, const scene_
 void trace_samples(trace_state& state, const scene_data& scene, const scene_bvh& bvh,
     const trace_context& context, const trace_params& params, int count) {
   trace_rows(state, scene, bvh, context, params, count, nullptr);
+}
+
+double clamped_energy_fraction(const trace_state& state) {
+  auto energy = 0.0, clamped = 0.0;
+  for (auto j = 0; j < (int)state.row_energy.size(); j++) {
+    energy += state.row_energy[j];
+    clamped += state.row_clamped[j];
+  }
+  return energy > 0 ? clamped / energy : 0;
 }
 
 texture_data get_image(int width, int height, const std::vector<fixed_sum3>& sums,

@@ -50,7 +50,9 @@ struct trace_params {
   // Sky samples that would add less than this times the sky's average
   // radiance play a roulette for their shadow ray (0 for none).
   float              shadow_threshold = 0.1f;
-  float              clamp      = 100;   // max sample value, 0 for none
+  // Largest component a sample may have (scaled down to it), 0 for none.
+  // Off by default: clamping removes energy (the image is biased).
+  float              clamp      = 0;
   uint64_t           seed       = 961748941;
   int                threads    = 0;     // 0 for all cores
   bool               hair_four_numbers = false;  // 4 independent numbers, no demux
@@ -108,7 +110,16 @@ struct trace_state {
   std::vector<fixed_sum3>    sums    = {};
   std::atomic<int64_t>       rays    = 0;  // rays cast (camera, bounce, shadow)
   std::atomic<int64_t>       nonfinite = 0;  // samples dropped as NaN or Inf
+  // What params.clamp did: samples clamped, and per image row the energy
+  // (sum of r, g, b) of the samples before clamping and the part removed
+  // (rows, so that the figures do not depend on the threads).
+  std::atomic<int64_t>       clamped        = 0;
+  std::vector<double>        row_energy     = {};
+  std::vector<double>        row_clamped    = {};
 };
+
+// The fraction of the samples' energy that clamping removed so far.
+double clamped_energy_fraction(const trace_state& state);
 
 // Checks the parameters against the scene; false with a message if wrong.
 bool check_trace_params(const scene_data& scene, const trace_params& params,
