@@ -187,7 +187,7 @@ TEST(cli, render_writes_a_complete_image_and_nothing_else) {
   auto before = list_files(dir);
   for (auto name : {"out.png", "out.exr", "out.hdr", "out.pfm", "out.jpg"}) {
     auto result = run_yscene("render " + (dir / "scene.json").string() + " -o " +
-                      (dir / name).string() + " -s 2 -r 32 --quiet");
+                      (dir / name).string() + " -s 2 -r 32");
     EXPECT_EQ(result.status, 0) << result.output;
     EXPECT_NE(result.output.find("rays/s"), std::string::npos) << result.output;
     auto image = texture_data{};
