@@ -286,6 +286,60 @@ TEST(bvh, occlusion_and_misses) {
   EXPECT_GT(bvh.peak_memory, 0);
 }
 
+// Two round fibres crossing with overlapping walls (axes 0.12 apart, radii
+// 0.1): a ray that starts inside one passes its wall, for closest hits and
+// shadow rays, and still sees the other from outside. Lines and Bezier
+// curves, directly and through rotated instances (two instances share each
+// shape, so they are not flattened).
+TEST(bvh, rays_starting_inside_a_fibre_pass_its_wall) {
+  for (auto curves : {false, true}) {
+    for (auto instanced : {false, true}) {
+      auto frame = instanced ? translation_frame({0.5f, 1, -2}) *
+                                   rotation_frame({0.2f, 1, 0.3f}, 0.9f)
+                             : identity3x4f;
+      // Fibre a along x through the origin; fibre b along y with its axis
+      // at z = 0.12 (fibre a turned about z, then lifted).
+      auto scene = make_straight_fiber_scene(curves, 0.1f, frame);
+      scene.instances.push_back(
+          {frame * translation_frame({0, 0, 0.12f}) * rotation_frame({0, 0, 1}, pif / 2), 0, 0});
+      if (instanced) {
+        // Far away copies, so that each shape has several users.
+        scene.instances.push_back({translation_frame({50, 0, 0}), 0, 0});
+      }
+      auto bvh   = scene_bvh{};
+      auto error = std::string{};
+      ASSERT_TRUE(make_scene_bvh(bvh, scene, {}, error)) << error;
+      auto what  = std::string(curves ? "curves" : "lines") + (instanced ? " instanced" : "");
+      auto world = [&](const vec3f& point) { return transform_point(frame, point); };
+      auto along = [&](const vec3f& direction) { return transform_direction(frame, direction); };
+      // From a's axis down, out through a's wall: nothing else is there.
+      auto down = ray3f{world({0.3f, 0, 0}), along({0, 0, -1})};
+      EXPECT_FALSE(intersect_scene_bvh(bvh, down).hit) << what;
+      EXPECT_FALSE(intersect_scene_bvh_any(bvh, down)) << what;
+      // From a's axis up: a's wall is passed, b (axis 0.12 up, radius 0.1)
+      // is met from outside, 0.02 away.
+      auto up  = ray3f{world({0, 0, 0}), along({0, 0, 1})};
+      auto hit = intersect_scene_bvh(bvh, up);
+      ASSERT_TRUE(hit.hit) << what;
+      EXPECT_EQ(hit.instance, 1) << what;
+      EXPECT_NEAR(hit.distance, 0.02f, 1e-3f) << what;
+      EXPECT_TRUE(intersect_scene_bvh_any(bvh, up)) << what;
+      // From inside both, sideways: out of both without a hit.
+      for (auto direction : {vec3f{1, 1, 0}, vec3f{1, -1, 0.2f}, vec3f{0, 0, -1}}) {
+        auto out = ray3f{world({0.01f, 0.02f, 0.06f}), along(normalize(direction))};
+        EXPECT_FALSE(intersect_scene_bvh(bvh, out).hit) << what;
+        EXPECT_FALSE(intersect_scene_bvh_any(bvh, out)) << what;
+      }
+      // From outside, a and b are hit as before.
+      auto from_below = ray3f{world({0.3f, 0, -1}), along({0, 0, 1})};
+      hit             = intersect_scene_bvh(bvh, from_below);
+      ASSERT_TRUE(hit.hit) << what;
+      EXPECT_EQ(hit.instance, 0) << what;
+      EXPECT_NEAR(hit.distance, 0.9f, 1e-3f) << what;
+    }
+  }
+}
+
 // Rays Embree would abort on (origin or direction beyond its range, NaN or
 // zero directions) are misses for closest hits and occluded for shadow rays.
 TEST(bvh, untraceable_rays_are_refused_not_aborted) {

@@ -191,6 +191,21 @@ static RTCGeometry make_triangle_geometry(RTCDevice device, const shape_data& sh
   return geometry;
 }
 
+// A round fibre is seen from outside only (see the header): a hit whose
+// geometric normal faces along the ray is the inner side of the wall, met by
+// a ray that starts inside the fibre, and is ignored. Normals and directions
+// transform so that the sign of their dot product is the same in every
+// space, instanced or not.
+static void ignore_hits_from_inside(const RTCFilterFunctionNArguments* args) {
+  for (auto i = 0u; i < args->N; i++) {
+    if (args->valid[i] != -1) continue;
+    auto inward = RTCRayN_dir_x(args->ray, args->N, i) * RTCHitN_Ng_x(args->hit, args->N, i) +
+                  RTCRayN_dir_y(args->ray, args->N, i) * RTCHitN_Ng_y(args->hit, args->N, i) +
+                  RTCRayN_dir_z(args->ray, args->N, i) * RTCHitN_Ng_z(args->hit, args->N, i);
+    if (inward > 0) args->valid[i] = 0;
+  }
+}
+
 // The geometry of a shape, committed; null for an empty shape.
 static RTCGeometry make_shape_geometry(RTCDevice device, const shape_data& shape,
     const bvh_curve_pieces& pieces, const bvh_params& params) {
@@ -209,6 +224,11 @@ static RTCGeometry make_shape_geometry(RTCDevice device, const shape_data& shape
     geometry = make_curve_geometry(device, shape, shape.curves,
         params.flat_curves ? RTC_GEOMETRY_TYPE_FLAT_BEZIER_CURVE
                            : RTC_GEOMETRY_TYPE_ROUND_BEZIER_CURVE);
+  }
+  // Round fibres only: a flat fibre faces every ray.
+  if (geometry && shape.triangles.empty() && !params.flat_curves) {
+    rtcSetGeometryIntersectFilterFunction(geometry, ignore_hits_from_inside);
+    rtcSetGeometryOccludedFilterFunction(geometry, ignore_hits_from_inside);
   }
   if (geometry) rtcCommitGeometry(geometry);
   return geometry;

@@ -12,6 +12,18 @@
 // to its segment); fiber geometry at a hit (tangent,
 // radius, signed offset h) is computed by `eval_fiber_point` in yocto_scene.
 //
+// Rays and fibres. A round fibre (line or curve) is a tube seen from outside
+// only: a ray that starts inside a fibre passes its wall without a hit (an
+// Embree filter drops hits whose geometric normal faces along the ray), for
+// closest hits and shadow rays alike. The hair model accounts for the whole
+// passage of light through the fibre it hit, so the renderer never needs the
+// inside; and fibres of generated or simulated grooms overlap their
+// neighbours, which real hair does not: a ray leaving one fibre often starts
+// inside another, whose inner wall must not trap it. A ray leaving a fibre
+// starts on the circle of 1.01 radius around the axis, on the side of its
+// direction (yocto_trace's spawn_ray), so it is outside its own fibre. Flat
+// fibres face every ray and have no inside.
+//
 
 #ifndef YOCTO_BVH_H_
 #define YOCTO_BVH_H_
