@@ -340,6 +340,227 @@ TEST(bvh, rays_starting_inside_a_fibre_pass_its_wall) {
   }
 }
 
+// A fibre of radius 0.08 as lines (two straight segments), one straight
+// Bezier, or one bent Bezier (an arch, split into pieces for Embree).
+enum struct fiber_kind { lines, straight_bezier, bent_bezier };
+static const char* fiber_kind_names[] = {"lines", "straight Bezier", "bent Bezier"};
+static scene_data make_fiber_kind_scene(fiber_kind kind, bool instanced) {
+  auto shape = shape_data{};
+  if (kind == fiber_kind::lines) {
+    shape.positions = {{-2, 0, 0}, {0, 0, 0}, {2, 0, 0}};
+    shape.lines     = {{0, 1}, {1, 2}};
+  } else {
+    auto rise       = kind == fiber_kind::bent_bezier ? 1.0f : 0.0f;
+    shape.positions = {{-2, 0, 0}, {-2.0f / 3, rise, 0}, {2.0f / 3, rise, 0}, {2, 0, 0}};
+    shape.curves    = {{0, 1, 2, 3}};
+  }
+  shape.radius.assign(shape.positions.size(), 0.08f);
+  auto scene = scene_data{};
+  scene.shapes.push_back(shape);
+  scene.materials.push_back({});
+  // Instanced: turned, scaled by a half, and shared with a far copy.
+  auto frame = instanced ? translation_frame({0.5f, 1, -2}) *
+                               rotation_frame({0.2f, 1, 0.3f}, 0.9f) *
+                               scaling_frame({0.5f, 0.5f, 0.5f})
+                         : identity3x4f;
+  scene.instances.push_back({frame, 0, 0});
+  if (instanced) scene.instances.push_back({translation_frame({50, 0, 0}), 0, 0});
+  return scene;
+}
+
+// The fibre's axis at u along the whole strand (0 to 1), in world space.
+static vec3f eval_strand_axis(const scene_data& scene, float u) {
+  auto& shape = scene.shapes[0];
+  auto& p     = shape.positions;
+  auto  local = shape.lines.empty()
+                    ? eval_bezier(p[0], p[1], p[2], p[3], u)
+                    : (u < 0.5f ? p[0] + (p[1] - p[0]) * (2 * u) : p[1] + (p[2] - p[1]) * (2 * u - 1));
+  return transform_point(scene.instances[0].frame, local);
+}
+
+// Distance from a point to the fibre's axis, by dense search along it.
+static float distance_to_axis(const scene_data& scene, const vec3f& point) {
+  auto best = flt_max, best_u = 0.0f;
+  for (auto i = 0; i <= 4000; i++) {
+    auto d = distance(point, eval_strand_axis(scene, i / 4000.0f));
+    if (d < best) best = d, best_u = i / 4000.0f;
+  }
+  // Ternary refinement within one step on each side (the distance is
+  // unimodal there).
+  auto a = std::max(best_u - 1 / 4000.0f, 0.0f), b = std::min(best_u + 1 / 4000.0f, 1.0f);
+  for (auto k = 0; k < 60; k++) {
+    auto m1 = a + (b - a) / 3, m2 = b - (b - a) / 3;
+    if (distance(point, eval_strand_axis(scene, m1)) < distance(point, eval_strand_axis(scene, m2)))
+      b = m2;
+    else
+      a = m1;
+  }
+  return std::min(best, distance(point, eval_strand_axis(scene, (a + b) / 2)));
+}
+
+// A strand's ends are closed by discs across its tangent: a fibre seen
+// along its axis from either end, round or flat, lines or Beziers, instanced
+// or not, shows its whole cap (lines: maybe the half sphere Embree adds). Without the caps, Embree's round curves miss
+// every ray parallel to the axis (the hole of issue 14), and its flat
+// Beziers most of them.
+TEST(bvh, fibre_ends_are_closed_by_caps) {
+  for (auto kind : {fiber_kind::lines, fiber_kind::straight_bezier, fiber_kind::bent_bezier}) {
+    for (auto flat : {false, true}) {
+      for (auto instanced : {false, true}) {
+        auto scene = make_fiber_kind_scene(kind, instanced);
+        auto bvh   = scene_bvh{};
+        auto error = std::string{};
+        ASSERT_TRUE(make_scene_bvh(bvh, scene, {flat}, error)) << error;
+        auto& shape  = scene.shapes[0];
+        auto& frame  = scene.instances[0].frame;
+        auto  radius = 0.08f * frame_scale(frame);
+        auto  what   = std::string(fiber_kind_names[(int)kind]) + (flat ? " flat" : " round") +
+                    (instanced ? " instanced" : "");
+        for (auto end = 0; end < 2; end++) {
+          // The end point and the outward tangent there, in world space.
+          auto& p       = shape.positions;
+          auto  last    = (int)p.size() - 1;
+          auto  center  = transform_point(frame, end ? p[last] : p[0]);
+          auto  outward = normalize(transform_direction(
+              frame, end ? p[last] - p[last - 1] : p[0] - p[1]));
+          // A pinhole 3 away on the axis; rays through a grid of points of
+          // the end plane, those within the cap's disc must hit it there.
+          auto basis = basis_fromz(outward);
+          auto eye = center + outward * 3.0f, side = basis[0], up = basis[1];
+          auto inside = 0, hits = 0;
+          for (auto i = 0; i < 41; i++) {
+            for (auto j = 0; j < 41; j++) {
+              auto x = (i / 20.0f - 1) * radius, y = (j / 20.0f - 1) * radius;
+              if (x * x + y * y > radius * radius * 0.995f) continue;
+              auto target = center + side * x + up * y;
+              auto ray    = ray3f{eye, normalize(target - eye)};
+              auto hit    = intersect_scene_bvh(bvh, ray);
+              inside++;
+              if (!hit.hit) continue;
+              hits++;
+              // On the disc; for lines, maybe on the half sphere Embree puts
+              // around a line's end, up to a radius before it.
+              auto disc = distance(eye, target);
+              EXPECT_LE(hit.distance, disc + 1e-4f) << what;
+              EXPECT_GE(hit.distance, kind == fiber_kind::lines ? disc - radius * 1.001f
+                                                                : disc - 1e-4f)
+                  << what;
+              EXPECT_EQ(hit.instance, 0) << what;
+              EXPECT_EQ(hit.element, end ? (int)(shape.lines.size() + shape.curves.size()) - 1 : 0)
+                  << what;
+              EXPECT_EQ(hit.uv.x, (float)end) << what;
+              EXPECT_TRUE(intersect_scene_bvh_any(bvh, ray)) << what;
+              auto fiber = eval_fiber_point(
+                  scene, scene.instances[0], hit.element, hit.uv.x, ray, hit.distance);
+              EXPECT_NEAR(distance(fiber.axis, center), 0, 1e-3f * radius) << what;
+              EXPECT_LE(std::abs(fiber.h), 1) << what;
+              EXPECT_NEAR(std::abs(dot(fiber.tangent, outward)), 1, 1e-5f) << what;
+            }
+          }
+          EXPECT_EQ(hits, inside) << what << (end ? " end" : " start");
+        }
+      }
+    }
+  }
+}
+
+// A ray leaving a fibre (spawn_fiber_ray, as the path tracer spawns it)
+// never hits the fibre's own surface: from hits on its side and on its caps,
+// in random directions, at grazing directions along the fibre and across
+// its surface, and through it (transmitted), for round and flat fibres,
+// lines and Beziers, instanced or not. A straight fibre is convex, so any
+// hit is a self-hit; a bent one may be met again elsewhere, and every such
+// hit must be a true one: on the surface, with the ray outside the fibre
+// before it.
+TEST(bvh, rays_leaving_a_fibre_miss_its_own_surface) {
+  auto rng = make_rng(91);
+  for (auto kind : {fiber_kind::lines, fiber_kind::straight_bezier, fiber_kind::bent_bezier}) {
+    for (auto flat : {false, true}) {
+      for (auto instanced : {false, true}) {
+        auto scene = make_fiber_kind_scene(kind, instanced);
+        auto bvh   = scene_bvh{};
+        auto error = std::string{};
+        ASSERT_TRUE(make_scene_bvh(bvh, scene, {flat}, error)) << error;
+        auto radius = 0.08f * frame_scale(scene.instances[0].frame);
+        auto what   = std::string(fiber_kind_names[(int)kind]) + (flat ? " flat" : " round") +
+                    (instanced ? " instanced" : "");
+        // Rays at the fibre: at points along it from random sides, and at
+        // its ends along its tangent (cap hits).
+        auto rays = std::vector<ray3f>{};
+        for (auto u : {0.0f, 0.01f, 0.3f, 0.5f, 0.77f, 0.99f, 1.0f}) {
+          auto axis    = eval_strand_axis(scene, u);
+          auto tangent = normalize(eval_strand_axis(scene, std::min(u + 1e-3f, 1.0f)) -
+                                   eval_strand_axis(scene, std::max(u - 1e-3f, 0.0f)));
+          if (u == 0 || u == 1) {
+            auto outward = u == 0 ? -tangent : tangent;
+            for (auto k = 0; k < 4; k++) {
+              auto offset = (rand1f(rng) - 0.5f) * radius * sample_sphere(rand2f(rng));
+              rays.push_back({axis + outward * 2.0f + offset, -outward});
+            }
+            continue;
+          }
+          for (auto k = 0; k < 6; k++) {
+            auto from = sample_sphere(rand2f(rng));
+            rays.push_back({axis + from * 2.0f, -from});
+          }
+        }
+        auto tested = 0;
+        for (auto& ray : rays) {
+          auto hit = intersect_scene_bvh(bvh, ray);
+          if (!hit.hit || hit.instance != 0) continue;
+          auto fiber = eval_fiber_point(
+              scene, scene.instances[0], hit.element, hit.uv.x, ray, hit.distance);
+          auto t = fiber.tangent, n = fiber.normal, b = normalize(cross(t, n));
+          auto directions = std::vector<vec3f>{};
+          for (auto k = 0; k < 16; k++) directions.push_back(sample_sphere(rand2f(rng)));
+          for (auto sign : {-1.0f, 1.0f}) {
+            // Along the fibre, exactly and almost.
+            for (auto tilt : {0.0f, 1e-5f, 1e-3f, 3e-2f})
+              for (auto across : {n, -n, b})
+                directions.push_back(normalize(sign * t + tilt * across));
+            // Across the surface, in its tangent plane and just off it.
+            for (auto phi : {0.0f, 0.5f, 1.2f, pif / 2})
+              for (auto off : {0.0f, 1e-3f, -1e-3f})
+                directions.push_back(
+                    normalize(std::cos(phi) * sign * t + std::sin(phi) * b + off * n));
+            // Through the fibre, as transmitted light leaves it.
+            for (auto theta : {0.0f, 0.3f, 1.0f, 1.5f})
+              directions.push_back(normalize(-n * std::cos(theta) + sign * t * std::sin(theta)));
+          }
+          for (auto& direction : directions) {
+            auto spawned = spawn_fiber_ray(fiber.axis, fiber.tangent, fiber.radius, n, direction);
+            auto again   = intersect_scene_bvh(bvh, spawned);
+            tested++;
+            if (kind != fiber_kind::bent_bezier) {
+              EXPECT_FALSE(again.hit) << what << ": a spawned ray hit its fibre at "
+                                      << again.distance;
+              EXPECT_FALSE(intersect_scene_bvh_any(bvh, spawned)) << what;
+              continue;
+            }
+            if (!again.hit) continue;
+            // A true hit on the bent fibre: on its surface (round) or
+            // within its radius (flat), and outside before it.
+            auto point = spawned.o + spawned.d * again.distance;
+            auto gap   = distance_to_axis(scene, point) - radius;
+            if (flat) {
+              // Embree draws flat curves as ray-facing quads, a little off
+              // the curve (0.5% of the radius is seen here).
+              EXPECT_LE(gap, 1e-2f * radius) << what << " at " << again.distance;
+            } else {
+              EXPECT_NEAR(gap, 0, 2e-3f * radius) << what << " at " << again.distance;
+            }
+            if (!flat) {
+              auto halfway = spawned.o + spawned.d * (again.distance / 2);
+              EXPECT_GE(distance_to_axis(scene, halfway), radius) << what;
+            }
+          }
+        }
+        EXPECT_GE(tested, 1500) << what;
+      }
+    }
+  }
+}
+
 // Rays Embree would abort on (origin or direction beyond its range, NaN or
 // zero directions) are misses for closest hits and occluded for shadow rays.
 TEST(bvh, untraceable_rays_are_refused_not_aborted) {

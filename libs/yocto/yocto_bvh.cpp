@@ -47,6 +47,17 @@ static bool embree_memory_callback(void* user, ssize_t bytes, bool) {
 // -----------------------------------------------------------------------------
 namespace yocto {
 
+// The outward direction of a strand's end (not normalized; zero when the
+// segment has no length): along the tangent at u = 1, against it at u = 0.
+static vec3f fiber_cap_normal(const std::vector<vec3f>& p, const vec2i& line, int end) {
+  return end ? p[line.y] - p[line.x] : p[line.x] - p[line.y];
+}
+static vec3f fiber_cap_normal(const std::vector<vec3f>& p, const vec4i& curve, int end) {
+  auto tangent = end ? p[curve.w] - p[curve.z] : p[curve.x] - p[curve.y];
+  if (length(tangent) > 0) return tangent;
+  return end ? p[curve.w] - p[curve.x] : p[curve.x] - p[curve.w];
+}
+
 // Vertices as Embree's float4 (position, radius).
 static vec4f fiber_vertex(const shape_data& shape, int index) {
   auto r = index < (int)shape.radius.size() ? shape.radius[index] : 0.001f;
@@ -180,6 +191,68 @@ static RTCGeometry make_curve_pieces_geometry(RTCDevice device, const shape_data
   return geometry;
 }
 
+// Strand ends: a segment end whose vertex is the end of no other segment,
+// packed as element << 1 | end (0 at u = 0, 1 at u = 1). Ends of radius zero
+// (tapered tips) and of no direction need no cap.
+static std::vector<uint32_t> make_fiber_caps(const shape_data& shape) {
+  auto  caps  = std::vector<uint32_t>{};
+  auto  count = (int)shape.positions.size();
+  auto& p     = shape.positions;
+  auto  ends  = std::vector<uint8_t>(count, 0);
+  auto  add_caps = [&](const auto& elements) {
+    if (elements.size() >= (1u << 31)) return;
+    auto valid = [&](const auto& element) {
+      for (auto k = 0; k < (int)element.length(); k++)
+        if (element[k] < 0 || element[k] >= count) return false;
+      return true;
+    };
+    auto last = (int)elements[0].length() - 1;
+    for (auto& element : elements) {
+      if (!valid(element)) continue;
+      ends[element[0]] = std::min(ends[element[0]] + 1, 2);
+      ends[element[last]] = std::min(ends[element[last]] + 1, 2);
+    }
+    for (auto i = 0; i < (int)elements.size(); i++) {
+      auto& element = elements[i];
+      if (!valid(element)) continue;
+      for (auto end = 0; end < 2; end++) {
+        auto vertex = element[end ? last : 0];
+        if (ends[vertex] != 1 || fiber_vertex(shape, vertex).w <= 0) continue;
+        if (length(fiber_cap_normal(p, element, end)) == 0) continue;
+        caps.push_back((uint32_t)i << 1 | end);
+      }
+    }
+  };
+  if (!shape.lines.empty()) add_caps(shape.lines);
+  else if (!shape.curves.empty()) add_caps(shape.curves);
+  return caps;
+}
+
+// One disc per strand end, facing out along the fibre's tangent there (the
+// direction eval_fiber_point takes, also where a Bezier's derivative is
+// zero), of the end's radius.
+static RTCGeometry make_cap_geometry(
+    RTCDevice device, const shape_data& shape, const std::vector<uint32_t>& caps) {
+  auto geometry = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_ORIENTED_DISC_POINT);
+  auto vertices = (vec4f*)rtcSetNewGeometryBuffer(geometry, RTC_BUFFER_TYPE_VERTEX, 0,
+      RTC_FORMAT_FLOAT4, sizeof(vec4f), caps.size());
+  auto normals  = (vec3f*)rtcSetNewGeometryBuffer(geometry, RTC_BUFFER_TYPE_NORMAL, 0,
+      RTC_FORMAT_FLOAT3, sizeof(vec3f), caps.size());
+  for (auto i = 0; i < (int)caps.size(); i++) {
+    auto element = (int)(caps[i] >> 1), end = (int)(caps[i] & 1);
+    if (!shape.lines.empty()) {
+      auto& line  = shape.lines[element];
+      vertices[i] = fiber_vertex(shape, end ? line.y : line.x);
+      normals[i]  = normalize(fiber_cap_normal(shape.positions, line, end));
+    } else {
+      auto& curve = shape.curves[element];
+      vertices[i] = fiber_vertex(shape, end ? curve.w : curve.x);
+      normals[i]  = normalize(fiber_cap_normal(shape.positions, curve, end));
+    }
+  }
+  return geometry;
+}
+
 static RTCGeometry make_triangle_geometry(RTCDevice device, const shape_data& shape) {
   auto geometry = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_TRIANGLE);
   auto vertices = (vec3f*)rtcSetNewGeometryBuffer(geometry, RTC_BUFFER_TYPE_VERTEX, 0,
@@ -234,6 +307,18 @@ static RTCGeometry make_shape_geometry(RTCDevice device, const shape_data& shape
   return geometry;
 }
 
+// The discs closing a shape's strand ends, committed; null when it has none.
+// A cap is seen from outside only, round fibres or flat.
+static RTCGeometry make_shape_caps(
+    RTCDevice device, const shape_data& shape, const std::vector<uint32_t>& caps) {
+  if (caps.empty()) return nullptr;
+  auto geometry = make_cap_geometry(device, shape, caps);
+  rtcSetGeometryIntersectFilterFunction(geometry, ignore_hits_from_inside);
+  rtcSetGeometryOccludedFilterFunction(geometry, ignore_hits_from_inside);
+  rtcCommitGeometry(geometry);
+  return geometry;
+}
+
 static void set_scene_quality(RTCScene scene, const bvh_params& params) {
   rtcSetSceneFlags(scene, params.compact ? RTC_SCENE_FLAG_COMPACT : RTC_SCENE_FLAG_NONE);
   rtcSetSceneBuildQuality(scene, params.quality == bvh_quality_type::high
@@ -243,12 +328,18 @@ static void set_scene_quality(RTCScene scene, const bvh_params& params) {
                                            : RTC_BUILD_QUALITY_LOW);
 }
 
+// A shape's own scene, for instancing: the shape is geometry 0, its caps 1.
 static RTCScene make_shape_scene(RTCDevice device, const shape_data& shape,
-    const bvh_curve_pieces& pieces, const bvh_params& params) {
+    const bvh_curve_pieces& pieces, const std::vector<uint32_t>& caps,
+    const bvh_params& params) {
   auto scene = rtcNewScene(device);
   set_scene_quality(scene, params);
   if (auto geometry = make_shape_geometry(device, shape, pieces, params)) {
     rtcAttachGeometryByID(scene, geometry, 0);
+    rtcReleaseGeometry(geometry);
+  }
+  if (auto geometry = make_shape_caps(device, shape, caps)) {
+    rtcAttachGeometryByID(scene, geometry, 1);
     rtcReleaseGeometry(geometry);
   }
   rtcCommitScene(scene);
@@ -320,25 +411,35 @@ bool make_scene_bvh(scene_bvh& bvh, const scene_data& scene, const bvh_params& p
   auto release_scene = [device_ref = bvh.device](void* s) { rtcReleaseScene((RTCScene)s); };
   bvh.shapes.resize(scene.shapes.size());
   bvh.pieces.resize(scene.shapes.size());
-  for (auto i = 0; i < (int)scene.shapes.size(); i++)
-    if (users[i] > 0) bvh.pieces[i] = make_curve_pieces(scene.shapes[i], params.max_curve_pieces);
+  bvh.caps.resize(scene.shapes.size());
+  for (auto i = 0; i < (int)scene.shapes.size(); i++) {
+    if (users[i] == 0) continue;
+    bvh.pieces[i] = make_curve_pieces(scene.shapes[i], params.max_curve_pieces);
+    bvh.caps[i]   = make_fiber_caps(scene.shapes[i]);
+  }
   for (auto& instance : scene.instances) {
     bvh.instance_shapes.push_back(instance.shape);
     if (is_flat(instance) || bvh.shapes[instance.shape]) continue;
     bvh.shapes[instance.shape] = std::shared_ptr<void>(
         make_shape_scene(device, scene.shapes[instance.shape], bvh.pieces[instance.shape],
-            params), release_scene);
+            bvh.caps[instance.shape], params), release_scene);
   }
   auto top = rtcNewScene(device);
   bvh.scene = std::shared_ptr<void>(top, release_scene);
   set_scene_quality(top, params);
-  // Geometry ids are instance indices, flat or not.
-  for (auto i = 0; i < (int)scene.instances.size(); i++) {
+  // Geometry ids are instance indices, flat or not; the caps of a flat
+  // instance i are geometry i + the number of instances.
+  auto ninstances = (int)scene.instances.size();
+  for (auto i = 0; i < ninstances; i++) {
     auto& instance = scene.instances[i];
     auto  geometry = RTCGeometry{nullptr};
     if (is_flat(instance)) {
-      geometry = make_shape_geometry(
-          device, scene.shapes[instance.shape], bvh.pieces[instance.shape], params);
+      auto& shape = scene.shapes[instance.shape];
+      if (auto caps = make_shape_caps(device, shape, bvh.caps[instance.shape])) {
+        rtcAttachGeometryByID(top, caps, ninstances + i);
+        rtcReleaseGeometry(caps);
+      }
+      geometry = make_shape_geometry(device, shape, bvh.pieces[instance.shape], params);
       if (!geometry) continue;
     } else {
       geometry = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_INSTANCE);
@@ -398,16 +499,26 @@ scene_intersection intersect_scene_bvh(const scene_bvh& bvh, const ray3f& ray) {
   rayhit.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
   rtcIntersect1((RTCScene)bvh.scene.get(), &context, &rayhit);
   if (rayhit.hit.geomID == RTC_INVALID_GEOMETRY_ID) return {};
-  auto intersection     = scene_intersection{};
-  // Flat instances are hit as geometry `instance` of the top-level scene.
-  intersection.instance = (int)(rayhit.hit.instID[0] != RTC_INVALID_GEOMETRY_ID
-                                    ? rayhit.hit.instID[0]
-                                    : rayhit.hit.geomID);
+  auto intersection = scene_intersection{};
+  // Flat instances are hit as geometry `instance` of the top-level scene,
+  // their caps as `instance` + the number of instances; instanced shapes as
+  // geometry 0 of their scene, their caps as 1.
+  auto ninstances = (unsigned)bvh.instance_shapes.size();
+  auto instanced  = rayhit.hit.instID[0] != RTC_INVALID_GEOMETRY_ID;
+  auto cap = instanced ? rayhit.hit.geomID == 1 : rayhit.hit.geomID >= ninstances;
+  intersection.instance = (int)(instanced ? rayhit.hit.instID[0]
+                                          : rayhit.hit.geomID - (cap ? ninstances : 0));
   intersection.element  = (int)rayhit.hit.primID;
   intersection.uv       = {rayhit.hit.u, rayhit.hit.v};
-  // A piece of a split segment: the segment and its own parameter.
-  auto& pieces = bvh.pieces[bvh.instance_shapes[intersection.instance]].pieces;
-  if (!pieces.empty()) {
+  auto shape            = bvh.instance_shapes[intersection.instance];
+  auto& pieces          = bvh.pieces[shape].pieces;
+  if (cap) {
+    // A cap: the segment it closes, at the end it closes.
+    auto packed          = bvh.caps[shape][intersection.element];
+    intersection.element = (int)(packed >> 1);
+    intersection.uv      = {(float)(packed & 1), 0};
+  } else if (!pieces.empty()) {
+    // A piece of a split segment: the segment and its own parameter.
     auto piece           = pieces[intersection.element];
     intersection.element = (int)(piece >> 4);
     intersection.uv.x    = std::min(

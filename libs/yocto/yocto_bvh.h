@@ -70,6 +70,8 @@ struct scene_bvh {
   std::shared_ptr<void>              scene  = nullptr;
   std::vector<std::shared_ptr<void>> shapes = {};
   std::vector<bvh_curve_pieces>      pieces = {};           // per shape
+  // Per shape, its strand ends closed by discs: element << 1 | end (u = end).
+  std::vector<std::vector<uint32_t>> caps = {};
   std::vector<int>                   instance_shapes = {};  // per instance
   std::shared_ptr<std::atomic<int64_t>> memory      = nullptr;
   int64_t                                 peak_memory = 0;

@@ -557,6 +557,13 @@ fiber_point eval_fiber_point(const scene_data& scene, const instance_data& insta
   return point;
 }
 
+ray3f spawn_fiber_ray(const vec3f& axis, const vec3f& tangent, float radius,
+    const vec3f& side, const vec3f& direction) {
+  auto away = direction - dot(direction, tangent) * tangent;
+  away      = length(away) > 1e-6f ? normalize(away) : side;
+  return {axis + away * (radius * 1.01f), direction, radius * 0.01f + ray_eps * 0.1f, flt_max};
+}
+
 }  // namespace yocto
 
 // -----------------------------------------------------------------------------

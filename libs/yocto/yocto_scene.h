@@ -221,6 +221,14 @@ struct fiber_point {
 fiber_point eval_fiber_point(const scene_data& scene, const instance_data& instance,
     int element, float u, const ray3f& ray, float distance);
 
+// A ray leaving a fiber at `axis` (with its tangent and radius there): it
+// starts on the circle of 1.01 radius around the axis, on the side that
+// `direction` heads to (`side` when it runs along the fiber), so that it
+// starts outside the fiber and moves away from it: the hair model accounts
+// for the whole passage of light through the fiber it leaves.
+ray3f spawn_fiber_ray(const vec3f& axis, const vec3f& tangent, float radius,
+    const vec3f& side, const vec3f& direction);
+
 // Procedural shapes: a UV sphere (steps along the equator, steps/2 rings)
 // with normals, and a quad of the given size in the xy plane facing +z.
 shape_data make_sphere_shape(int steps, float radius);

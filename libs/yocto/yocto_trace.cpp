@@ -361,16 +361,11 @@ static trace_point eval_trace_point(const scene_data& scene, const trace_context
   return point;
 }
 
-// A ray leaving a point. Fiber rays start just outside the fiber on the side
-// they head to, so that a transmitted path does not hit the same fiber again:
-// the hair BSDF already accounts for the whole passage through it.
+// A ray leaving a point: fibers by spawn_fiber_ray (yocto_scene), surfaces
+// offset along the normal to the side of the direction.
 static ray3f spawn_ray(const trace_point& point, const vec3f& direction) {
-  if (point.fiber) {
-    auto side = direction - dot(direction, point.tangent) * point.tangent;
-    side      = length(side) > 1e-6f ? normalize(side) : point.normal;
-    auto o    = point.axis + side * (point.radius * 1.01f);
-    return {o, direction, point.radius * 0.01f + ray_eps * 0.1f, flt_max};
-  }
+  if (point.fiber)
+    return spawn_fiber_ray(point.axis, point.tangent, point.radius, point.normal, direction);
   auto scale  = std::max(1.0f, max_component(abs(point.position)));
   auto offset = point.normal * (ray_eps * scale);
   auto o      = point.position + (dot(direction, point.normal) >= 0 ? offset : -offset);
