@@ -211,6 +211,59 @@ TEST(trace, hair_scene_has_no_nan_and_the_hair_is_visible) {
   EXPECT_LT(mean(center), 0.85f);
 }
 
+// Fibres pointing at the camera, one exactly along its central ray, lines
+// and Beziers. Black ones show their caps black, never the sky through a
+// hole. Hair ones are shaded with the hair model at its hard case (light
+// along the fibre, cos theta = 0) and nothing non-finite comes out.
+TEST(trace, fibres_seen_end_on_show_their_caps) {
+  for (auto curves : {false, true}) {
+    for (auto black : {true, false}) {
+      auto scene = scene_data{};
+      scene.cameras.push_back(make_test_camera(4));
+      scene.environments.push_back({identity3x4f, {0.8f, 0.9f, 1}, -1});
+      auto strands = shape_data{};
+      for (auto center : {vec2f{0, 0}, vec2f{0.5f, 0.3f}, vec2f{-0.4f, -0.6f}}) {
+        auto base = (int)strands.positions.size();
+        for (auto k = 0; k < 4; k++) {
+          strands.positions.push_back({center.x, center.y, 1 - 2 * k / 3.0f});
+          strands.radius.push_back(0.15f);
+        }
+        if (curves) {
+          strands.curves.push_back({base, base + 1, base + 2, base + 3});
+        } else {
+          for (auto k = 0; k < 3; k++) strands.lines.push_back({base + k, base + k + 1});
+        }
+      }
+      scene.shapes.push_back(strands);
+      auto material = material_data{};
+      if (black) {
+        material.color = {0, 0, 0};
+      } else {
+        material.type           = material_type::hair;
+        material.hair.eumelanin = 1.5f;
+      }
+      scene.materials.push_back(material);
+      scene.instances.push_back({identity3x4f, 0, 0});
+      auto params       = trace_params{};
+      params.resolution = 64;
+      params.samples    = 16;
+      auto render       = render_scene(scene, params);
+      auto what         = std::string(curves ? "curves" : "lines") + (black ? " black" : " hair");
+      EXPECT_EQ(render.nonfinite, 0) << what;
+      for (auto& p : render.image.pixels) ASSERT_TRUE(isfinite(p)) << what;
+      if (!black) continue;
+      // The central fibre's cap, 0.15 in radius at distance 3, covers the
+      // 4 x 4 pixels around the centre of the 64 x 64 image (2.2 across).
+      for (auto j = 30; j < 34; j++) {
+        for (auto i = 30; i < 34; i++) {
+          EXPECT_EQ(render.image.pixels[j * 64 + i], (vec3f{0, 0, 0}))
+              << what << " pixel " << i << ", " << j;
+        }
+      }
+    }
+  }
+}
+
 // An emissive sphere over a grey floor, nothing else: light sampling picks
 // points on the whole sphere, half of them hidden by its near side.
 static scene_data make_sphere_light_scene() {
