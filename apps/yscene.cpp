@@ -228,8 +228,7 @@ static bool check_render_output(
             std::to_string(params.resolution) + ")";
     return false;
   }
-  // A part holds 84 bytes a pixel before compression (see save_render_part).
-  auto pixel_bytes = options.sample_range.empty() ? 12 : 84;
+  auto pixel_bytes = options.sample_range.empty() ? 12 : render_part_pixel_bytes;
   return check_output_file(options.output, side * side * pixel_bytes + 65536, error);
 }
 
@@ -276,12 +275,9 @@ static std::string render_settings(const scene_data& scene, const trace_params& 
     for (auto value : values) result += (result.empty() ? "" : " ") + number(value);
     return result;
   };
-  char fingerprint[32];
-  std::snprintf(fingerprint, sizeof(fingerprint), "%016llx",
-      (unsigned long long)fingerprint_scene(scene));
   auto& camera = scene.cameras[params.camera];
   auto& frame  = camera.frame;
-  line("scene", fingerprint);
+  line("scene", hex_string(fingerprint_scene(scene)));
   line("camera", std::to_string(params.camera));
   line("camera_frame", numbers({frame.x.x, frame.x.y, frame.x.z, frame.y.x, frame.y.y,
                            frame.y.z, frame.z.x, frame.z.y, frame.z.z, frame.o.x, frame.o.y,
@@ -578,7 +574,8 @@ static int run_merge(const merge_options& options) {
     if (!load_render_part(filename, part, error)) return print_error(error);
     if (ranges.empty()) {
       // Fail before the work if the output cannot be written.
-      auto bytes = (double)part.width * part.height * (options.part ? 84 : 12) + 65536;
+      auto pixel_bytes = options.part ? render_part_pixel_bytes : 12;
+      auto bytes       = (double)part.width * part.height * pixel_bytes + 65536;
       if (!check_output_file(output, bytes, error)) return print_error(error);
       merged.settings = part.settings;
       merged.samples  = part.samples;

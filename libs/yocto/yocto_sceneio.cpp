@@ -1377,7 +1377,7 @@ static uint64_t render_part_checksum(const render_part& part) {
   return stream.hash;
 }
 
-static std::string hex_string(uint64_t value) {
+std::string hex_string(uint64_t value) {
   char buffer[32];
   std::snprintf(buffer, sizeof(buffer), "%016llx", (unsigned long long)value);
   return buffer;
@@ -1418,7 +1418,7 @@ bool save_render_part(const std::string& filename, const render_part& part,
     float    mean[3];
     uint32_t halves[18];
   };
-  static_assert(sizeof(part_pixel) == 21 * 4);
+  static_assert(sizeof(part_pixel) == render_part_pixel_bytes);
   auto pixels = std::vector<part_pixel>(part.sums.size());
   for (size_t i = 0; i < part.sums.size(); i++) {
     auto mean = fixed_to_double(part.sums[i]) / (double)part.count;
