@@ -16,6 +16,7 @@
 #include <filesystem>
 #include <sstream>
 #include <functional>
+#include <nlohmann/json.hpp>
 #include <yocto/yocto_bvh.h>
 #include <yocto/yocto_hairgen.h>
 #include <yocto/yocto_pbrtio.h>
@@ -227,8 +228,7 @@ static bool check_render_output(
             std::to_string(params.resolution) + ")";
     return false;
   }
-  // A part holds 84 bytes a pixel before compression (see save_render_part).
-  auto pixel_bytes = options.sample_range.empty() ? 12 : 84;
+  auto pixel_bytes = options.sample_range.empty() ? 12 : render_part_pixel_bytes;
   return check_output_file(options.output, side * side * pixel_bytes + 65536, error);
 }
 
@@ -275,12 +275,9 @@ static std::string render_settings(const scene_data& scene, const trace_params& 
     for (auto value : values) result += (result.empty() ? "" : " ") + number(value);
     return result;
   };
-  char fingerprint[32];
-  std::snprintf(fingerprint, sizeof(fingerprint), "%016llx",
-      (unsigned long long)fingerprint_scene(scene));
   auto& camera = scene.cameras[params.camera];
   auto& frame  = camera.frame;
-  line("scene", fingerprint);
+  line("scene", hex_string(fingerprint_scene(scene)));
   line("camera", std::to_string(params.camera));
   line("camera_frame", numbers({frame.x.x, frame.x.y, frame.x.z, frame.y.x, frame.y.y,
                            frame.y.z, frame.z.x, frame.z.y, frame.z.z, frame.o.x, frame.o.y,
@@ -577,7 +574,8 @@ static int run_merge(const merge_options& options) {
     if (!load_render_part(filename, part, error)) return print_error(error);
     if (ranges.empty()) {
       // Fail before the work if the output cannot be written.
-      auto bytes = (double)part.width * part.height * (options.part ? 84 : 12) + 65536;
+      auto pixel_bytes = options.part ? render_part_pixel_bytes : 12;
+      auto bytes       = (double)part.width * part.height * pixel_bytes + 65536;
       if (!check_output_file(output, bytes, error)) return print_error(error);
       merged.settings = part.settings;
       merged.samples  = part.samples;
@@ -666,32 +664,11 @@ struct info_options {
   bool        json  = false;
 };
 
-static std::string json_number(double value) {
-  if (!std::isfinite(value)) return "null";
-  char buffer[64];
-  std::snprintf(buffer, sizeof(buffer), "%.9g", value);
-  return buffer;
-}
-static std::string json_vec3(const vec3f& value) {
-  return "[" + json_number(value.x) + ", " + json_number(value.y) + ", " +
-         json_number(value.z) + "]";
-}
-static std::string json_string(const std::string& text) {
-  auto result = std::string{"\""};
-  for (auto character : text) {
-    if (character == '"' || character == '\\') {
-      result += '\\';
-      result += character;
-    } else if ((unsigned char)character < 0x20) {
-      char buffer[8];
-      std::snprintf(buffer, sizeof(buffer), "\\u%04x", character);
-      result += buffer;
-    } else {
-      result += character;
-    }
-  }
-  return result + "\"";
-}
+// info --json's document: keys in the order written and numbers as floats, the
+// type of every value here, so that each prints as its shortest text (0.05,
+// not 0.05000000074505806). NaN and Inf print as null.
+using info_json = nlohmann::basic_json<nlohmann::ordered_map, std::vector, std::string, bool,
+    std::int64_t, std::uint64_t, float>;
 
 // A name from a names array, or "#index" when the array lacks it.
 static std::string element_name(const std::vector<std::string>& names, int index) {
@@ -739,86 +716,78 @@ static int run_info(const info_options& options) {
   };
 
   if (options.json) {
-    auto out = std::string{"{\n"};
-    out += "  \"scene\": " + json_string(filename) + ",\n";
-    out += "  \"counts\": {\"cameras\": " + std::to_string(scene.cameras.size()) +
-           ", \"environments\": " + std::to_string(scene.environments.size()) +
-           ", \"distant_lights\": " + std::to_string(scene.distant_lights.size()) +
-           ", \"shapes\": " + std::to_string(scene.shapes.size()) +
-           ", \"instances\": " + std::to_string(scene.instances.size()) +
-           ", \"materials\": " + std::to_string(scene.materials.size()) +
-           ", \"textures\": " + std::to_string(scene.textures.size()) +
-           ", \"vertices\": " + std::to_string(vertices) +
-           ", \"triangles\": " + std::to_string(triangles) +
-           ", \"lines\": " + std::to_string(lines) + ", \"curves\": " + std::to_string(curves) +
-           "},\n";
-    out += "  \"memory\": " + std::to_string(bytes) + ",\n";
-    out += "  \"bounds\": " +
-           (empty(bounds) ? std::string{"null"}
-                          : "[" + json_vec3(bounds.min) + ", " + json_vec3(bounds.max) + "]") +
-           ",\n";
-    out += "  \"cameras\": [";
+    auto vec3 = [](const vec3f& value) { return info_json::array({value.x, value.y, value.z}); };
+    auto json = info_json::object();
+    json["scene"]  = filename;
+    json["counts"] = {{"cameras", scene.cameras.size()},
+        {"environments", scene.environments.size()},
+        {"distant_lights", scene.distant_lights.size()}, {"shapes", scene.shapes.size()},
+        {"instances", scene.instances.size()}, {"materials", scene.materials.size()},
+        {"textures", scene.textures.size()}, {"vertices", vertices}, {"triangles", triangles},
+        {"lines", lines}, {"curves", curves}};
+    json["memory"] = bytes;
+    json["bounds"] = empty(bounds) ? info_json(nullptr)
+                                   : info_json::array({vec3(bounds.min), vec3(bounds.max)});
+    auto cameras = info_json::array();
     for (auto i = 0; i < (int)scene.cameras.size(); i++) {
       auto& camera = scene.cameras[i];
       auto  size   = camera_resolution(camera, resolution);
       auto  fov    = camera_fov(camera);
-      out += std::string(i ? "," : "") + "\n    {\"name\": " +
-             json_string(element_name(scene.camera_names, i)) +
-             ", \"position\": " + json_vec3(camera.frame.o) +
-             ", \"direction\": " + json_vec3(-camera.frame.z) + ", \"up\": " +
-             json_vec3(camera.frame.y) + ", \"orthographic\": " +
-             (camera.orthographic ? "true" : "false") + ", \"lens\": " +
-             json_number(camera.lens) + ", \"film\": " + json_number(camera.film) +
-             ", \"fov_degrees\": [" + json_number(fov.x) + ", " + json_number(fov.y) +
-             "], \"aspect\": " + json_number(camera.aspect) + ", \"focus\": " +
-             json_number(camera.focus) + ", \"aperture\": " + json_number(camera.aperture) +
-             ", \"resolution\": [" + std::to_string(size.x) + ", " + std::to_string(size.y) +
-             "]}";
+      cameras.push_back({{"name", element_name(scene.camera_names, i)},
+          {"position", vec3(camera.frame.o)}, {"direction", vec3(-camera.frame.z)},
+          {"up", vec3(camera.frame.y)}, {"orthographic", camera.orthographic},
+          {"lens", camera.lens}, {"film", camera.film},
+          {"fov_degrees", info_json::array({fov.x, fov.y})}, {"aspect", camera.aspect},
+          {"focus", camera.focus}, {"aperture", camera.aperture},
+          {"resolution", info_json::array({size.x, size.y})}});
     }
-    out += "\n  ],\n  \"materials\": [";
+    json["cameras"] = std::move(cameras);
+    auto materials = info_json::array();
     for (auto i = 0; i < (int)scene.materials.size(); i++) {
       auto& material = scene.materials[i];
-      out += std::string(i ? "," : "") + "\n    {\"name\": " +
-             json_string(element_name(scene.material_names, i)) + ", \"type\": " +
-             json_string(material_type_names[(int)material.type]) + ", \"emission\": " +
-             json_vec3(material.emission) + ", \"emission_tex\": " +
-             json_string(texture_text(material.emission_tex));
+      auto  item     = info_json{{"name", element_name(scene.material_names, i)},
+          {"type", material_type_names[(int)material.type]},
+          {"emission", vec3(material.emission)},
+          {"emission_tex", texture_text(material.emission_tex)}};
       if (material.type == material_type::hair) {
-        auto& hair = material.hair;
-        auto  used = make_hair_precomputed(hair);
-        out += ", \"sigma_a\": " + json_vec3(used.sigma_a) + ", \"sigma_a_from\": " +
-               json_string(hair_sigma_a_source(hair)) + ", \"eumelanin\": " +
-               json_number(hair.eumelanin) + ", \"pheomelanin\": " +
-               json_number(hair.pheomelanin) + ", \"color\": " + json_vec3(hair.color) +
-               ", \"beta_m\": " + json_number(hair.beta_m) + ", \"beta_n\": " +
-               json_number(hair.beta_n) + ", \"alpha\": " + json_number(hair.alpha) +
-               ", \"eta\": " + json_number(hair.eta);
+        auto& hair           = material.hair;
+        auto  used           = make_hair_precomputed(hair);
+        item["sigma_a"]      = vec3(used.sigma_a);
+        item["sigma_a_from"] = hair_sigma_a_source(hair);
+        item["eumelanin"]    = hair.eumelanin;
+        item["pheomelanin"]  = hair.pheomelanin;
+        item["color"]        = vec3(hair.color);
+        item["beta_m"]       = hair.beta_m;
+        item["beta_n"]       = hair.beta_n;
+        item["alpha"]        = hair.alpha;
+        item["eta"]          = hair.eta;
       } else {
-        out += ", \"color\": " + json_vec3(material.color) + ", \"color_tex\": " +
-               json_string(texture_text(material.color_tex));
-        if (material.type == material_type::glossy)
-          out += ", \"roughness\": " + json_number(material.roughness) + ", \"ior\": " +
-                 json_number(material.ior);
+        item["color"]     = vec3(material.color);
+        item["color_tex"] = texture_text(material.color_tex);
+        if (material.type == material_type::glossy) {
+          item["roughness"] = material.roughness;
+          item["ior"]       = material.ior;
+        }
       }
-      out += "}";
+      materials.push_back(std::move(item));
     }
-    out += "\n  ],\n  \"environments\": [";
+    json["materials"] = std::move(materials);
+    auto environments = info_json::array();
     for (auto i = 0; i < (int)scene.environments.size(); i++) {
       auto& environment = scene.environments[i];
-      out += std::string(i ? "," : "") + "\n    {\"name\": " +
-             json_string(element_name(scene.environment_names, i)) + ", \"emission\": " +
-             json_vec3(environment.emission) + ", \"emission_tex\": " +
-             json_string(texture_text(environment.emission_tex)) + ", \"up\": " +
-             json_vec3(environment.frame.y) + "}";
+      environments.push_back({{"name", element_name(scene.environment_names, i)},
+          {"emission", vec3(environment.emission)},
+          {"emission_tex", texture_text(environment.emission_tex)},
+          {"up", vec3(environment.frame.y)}});
     }
-    out += "\n  ],\n  \"distant_lights\": [";
-    for (auto i = 0; i < (int)scene.distant_lights.size(); i++) {
-      auto& light = scene.distant_lights[i];
-      out += std::string(i ? "," : "") + "\n    {\"direction\": " + json_vec3(light.direction) +
-             ", \"emission\": " + json_vec3(light.emission) + "}";
-    }
-    out += "\n  ]\n}\n";
-    std::fputs(out.c_str(), stdout);
+    json["environments"] = std::move(environments);
+    auto lights = info_json::array();
+    for (auto& light : scene.distant_lights)
+      lights.push_back(
+          {{"direction", vec3(light.direction)}, {"emission", vec3(light.emission)}});
+    json["distant_lights"] = std::move(lights);
+    // Names are bytes: invalid UTF-8 prints as U+FFFD rather than throwing.
+    std::puts(json.dump(2, ' ', false, info_json::error_handler_t::replace).c_str());
     return 0;
   }
 

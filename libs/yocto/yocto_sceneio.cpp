@@ -1270,6 +1270,30 @@ bool load_image(const std::string& filename, texture_data& image, std::string& e
   return true;
 }
 
+// Encodes `pixels`, laid out in the spec's channel formats, into `data` with
+// OpenImageIO, in memory; `what` names the file in the errors.
+static bool encode_with_oiio(const std::string& filename, const std::string& what,
+    OIIO::ImageSpec spec, const void* pixels, std::string& data, std::string& error) {
+  auto output = OIIO::ImageOutput::create(filename);
+  if (!output) {
+    error = filename + ": cannot save " + what + " (" + OIIO::geterror() + ")";
+    return false;
+  }
+  auto bytes  = std::vector<unsigned char>{};
+  auto memory = OIIO::Filesystem::IOVecOutput(bytes);
+  auto proxy  = (OIIO::Filesystem::IOProxy*)&memory;
+  spec.attribute("oiio:ioproxy", OIIO::TypeDesc::PTR, &proxy);
+  auto failed = [&](const std::string& step) {
+    error = filename + ": cannot " + step + " " + what + " (" + output->geterror() + ")";
+    return false;
+  };
+  if (!output->open(filename, spec)) return failed("create");
+  if (!output->write_image(OIIO::TypeDesc::UNKNOWN, pixels)) return failed("write");
+  if (!output->close()) return failed("finish");
+  data.assign(bytes.begin(), bytes.end());
+  return true;
+}
+
 // Encodes an image in memory: the bytes then go to disk through
 // save_binary, which checks the write (OpenImageIO does not report a failed
 // write of some formats, and libjpeg ends the program on one).
@@ -1299,42 +1323,21 @@ static bool encode_image(const std::string& filename, const texture_data& image,
   }
 
   if (extension == ".pfm") return encode_pfm(image, data), true;
-  auto linear = is_linear_extension(extension);
-  auto output = OIIO::ImageOutput::create(filename);
-  if (!output) {
-    error = filename + ": cannot save image (" + OIIO::geterror() + ")";
-    return false;
+  if (is_linear_extension(extension)) {
+    auto spec = OIIO::ImageSpec(image.width, image.height, 3, OIIO::TypeDesc::FLOAT);
+    return encode_with_oiio(filename, "image", spec, image.pixels.data(), data, error);
   }
-  auto bytes  = std::vector<unsigned char>{};
-  auto memory = OIIO::Filesystem::IOVecOutput(bytes);
-  auto proxy  = (OIIO::Filesystem::IOProxy*)&memory;
-  auto type   = linear ? OIIO::TypeDesc::FLOAT : OIIO::TypeDesc::UINT8;
-  auto spec   = OIIO::ImageSpec(image.width, image.height, 3, type);
-  if (!linear) spec.attribute("oiio:ColorSpace", "sRGB");
-  spec.attribute("oiio:ioproxy", OIIO::TypeDesc::PTR, &proxy);
-  auto failed = [&](const std::string& what) {
-    error = filename + ": " + what + " (" + output->geterror() + ")";
-    return false;
-  };
-  if (!output->open(filename, spec)) return failed("cannot create image");
-  auto written = false;
-  if (linear) {
-    written = output->write_image(OIIO::TypeDesc::FLOAT, image.pixels.data());
-  } else {
-    auto scale  = std::exp2(exposure);
-    auto pixels = std::vector<uint8_t>(image.pixels.size() * 3);
-    for (size_t i = 0; i < image.pixels.size(); i++) {
-      for (auto c = 0; c < 3; c++) {
-        auto value = std::clamp(image.pixels[i][c] * scale, 0.0f, 1.0f);
-        pixels[i * 3 + c] = (uint8_t)std::lround(linear_to_srgb(value) * 255);
-      }
+  auto spec = OIIO::ImageSpec(image.width, image.height, 3, OIIO::TypeDesc::UINT8);
+  spec.attribute("oiio:ColorSpace", "sRGB");
+  auto scale  = std::exp2(exposure);
+  auto pixels = std::vector<uint8_t>(image.pixels.size() * 3);
+  for (size_t i = 0; i < image.pixels.size(); i++) {
+    for (auto c = 0; c < 3; c++) {
+      auto value = std::clamp(image.pixels[i][c] * scale, 0.0f, 1.0f);
+      pixels[i * 3 + c] = (uint8_t)std::lround(linear_to_srgb(value) * 255);
     }
-    written = output->write_image(OIIO::TypeDesc::UINT8, pixels.data());
   }
-  if (!written) return failed("cannot write image");
-  if (!output->close()) return failed("cannot finish image");
-  data.assign(bytes.begin(), bytes.end());
-  return true;
+  return encode_with_oiio(filename, "image", spec, pixels.data(), data, error);
 }
 
 bool save_image(const std::string& filename, const texture_data& image,
@@ -1374,7 +1377,7 @@ static uint64_t render_part_checksum(const render_part& part) {
   return stream.hash;
 }
 
-static std::string hex_string(uint64_t value) {
+std::string hex_string(uint64_t value) {
   char buffer[32];
   std::snprintf(buffer, sizeof(buffer), "%016llx", (unsigned long long)value);
   return buffer;
@@ -1415,7 +1418,7 @@ bool save_render_part(const std::string& filename, const render_part& part,
     float    mean[3];
     uint32_t halves[18];
   };
-  static_assert(sizeof(part_pixel) == 21 * 4);
+  static_assert(sizeof(part_pixel) == render_part_pixel_bytes);
   auto pixels = std::vector<part_pixel>(part.sums.size());
   for (size_t i = 0; i < part.sums.size(); i++) {
     auto mean = fixed_to_double(part.sums[i]) / (double)part.count;
@@ -1428,21 +1431,9 @@ bool save_render_part(const std::string& filename, const render_part& part,
       }
     }
   }
-  auto output = OIIO::ImageOutput::create(filename);
-  if (!output) {
-    error = filename + ": cannot save render part (" + OIIO::geterror() + ")";
-    return false;
-  }
-  auto bytes  = std::vector<unsigned char>{};
-  auto memory = OIIO::Filesystem::IOVecOutput(bytes);
-  auto proxy  = (OIIO::Filesystem::IOProxy*)&memory;
-  spec.attribute("oiio:ioproxy", OIIO::TypeDesc::PTR, &proxy);
-  if (!output->open(filename, spec) ||
-      !output->write_image(OIIO::TypeDesc::UNKNOWN, pixels.data()) || !output->close()) {
-    error = filename + ": cannot save render part (" + output->geterror() + ")";
-    return false;
-  }
-  return save_binary(filename, std::string(bytes.begin(), bytes.end()), error, replace);
+  auto data = std::string{};
+  if (!encode_with_oiio(filename, "render part", spec, pixels.data(), data, error)) return false;
+  return save_binary(filename, data, error, replace);
 }
 
 // A whole decimal number from an attribute, or false.

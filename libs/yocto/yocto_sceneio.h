@@ -127,6 +127,9 @@ struct render_part {
   std::vector<fixed_sum3> sums      = {};
 };
 
+// A part's bytes a pixel before compression: R, G, B as floats, 18 halves.
+inline constexpr int render_part_pixel_bytes = 84;
+
 // Saves a part as an OpenEXR image (the name must end in .exr), written as
 // any output (complete or absent). Channels R, G, B hold the mean of the
 // part's samples, to look at; the 18 32-bit unsigned channels sum.R.0 ...
@@ -142,6 +145,9 @@ bool save_render_part(const std::string& filename, const render_part& part,
 // Loads a part: a file that is not a part, truncated, damaged (checksum),
 // or inconsistent (a range outside [0, samples)) is an error naming it.
 bool load_render_part(const std::string& filename, render_part& part, std::string& error);
+
+// A 64-bit value as 16 lower-case hex digits (part checksums, scene fingerprints).
+std::string hex_string(uint64_t value);
 
 }  // namespace yocto
 

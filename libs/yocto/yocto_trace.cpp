@@ -627,12 +627,15 @@ static void trace_rows(trace_state& state, const scene_data& scene, const scene_
           nonfinite++;
           continue;
         }
-        auto sample_energy = (double)radiance.x + radiance.y + radiance.z;
-        energy += sample_energy;
-        if (params.clamp > 0 && max_component(radiance) > params.clamp) {
-          radiance *= params.clamp / max_component(radiance);
-          clamped++;
-          clamped_energy += sample_energy - ((double)radiance.x + radiance.y + radiance.z);
+        // The energies only serve the clamped share: summed when clamping.
+        if (params.clamp > 0) {
+          auto sample_energy = (double)radiance.x + radiance.y + radiance.z;
+          energy += sample_energy;
+          if (max_component(radiance) > params.clamp) {
+            radiance *= params.clamp / max_component(radiance);
+            clamped++;
+            clamped_energy += sample_energy - ((double)radiance.x + radiance.y + radiance.z);
+          }
         }
         // Beyond what the exact sum holds (1e29): as good as infinite.
         if (max_component(abs(radiance)) >= fixed_sum_max_sample) {

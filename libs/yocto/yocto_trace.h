@@ -112,7 +112,8 @@ struct trace_state {
   std::atomic<int64_t>       nonfinite = 0;  // samples dropped as NaN or Inf
   // What params.clamp did: samples clamped, and per image row the energy
   // (sum of r, g, b) of the samples before clamping and the part removed
-  // (rows, so that the figures do not depend on the threads).
+  // (rows, so that the figures do not depend on the threads); with clamp off
+  // the energies are left at zero.
   std::atomic<int64_t>       clamped        = 0;
   std::vector<double>        row_energy     = {};
   std::vector<double>        row_clamped    = {};
