@@ -2,8 +2,9 @@
 // # Yocto/Bvh: ray queries on Embree
 //
 // One Embree geometry per shape (triangles, round linear curves for lines,
-// round cubic Bezier curves for curves, or ray-facing flat curves on request)
-// in a top-level scene. An instance with the identity frame whose shape no
+// round cubic Bezier curves for curves, or ray-facing flat curves on request;
+// fibre shapes also get one of discs that close their strands' ends) in a
+// top-level scene. An instance with the identity frame whose shape no
 // other instance uses is put in the top-level scene directly (one traversal
 // level less, the common case of hair scenes); others are Embree instances of
 // a per-shape scene. Bent Bezier segments are split into exact pieces for
@@ -21,8 +22,16 @@
 // neighbours, which real hair does not: a ray leaving one fibre often starts
 // inside another, whose inner wall must not trap it. A ray leaving a fibre
 // starts on the circle of 1.01 radius around the axis, on the side of its
-// direction (yocto_trace's spawn_ray), so it is outside its own fibre. Flat
-// fibres face every ray and have no inside.
+// direction (spawn_fiber_ray in yocto_scene), so it is outside its own fibre
+// and moves away from it. Flat fibres face every ray and have no inside.
+//
+// Caps. A strand is closed at each end (a segment end whose vertex ends no
+// other segment) by a flat disc across its tangent there, of the end's
+// radius, seen from outside only; a hit on it is a hit on the end segment at
+// u = 0 or 1, shaded like any hit on the fibre. Without it Embree's round
+// curves are open at the ends and miss rays along the axis, so a fibre seen
+// end-on showed a hole. Lines also keep the half sphere Embree puts around
+// a line's end; ends of radius 0 (tapered tips) have no cap.
 //
 
 #ifndef YOCTO_BVH_H_
