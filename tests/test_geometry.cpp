@@ -9,6 +9,7 @@
 #include <yocto/yocto_scene.h>
 
 #include <cmath>
+#include <functional>
 
 using namespace yocto;
 
@@ -368,6 +369,30 @@ static scene_data make_fiber_kind_scene(fiber_kind kind, bool instanced) {
   return scene;
 }
 
+// Each fibre of the tests below: every kind, round and flat, direct and
+// instanced, with its BVH and a name for messages.
+struct fiber_case {
+  fiber_kind  kind  = fiber_kind::lines;
+  bool        flat  = false;
+  scene_data  scene = {};
+  scene_bvh   bvh   = {};
+  std::string what  = "";
+};
+static void for_each_fiber_case(const std::function<void(const fiber_case&)>& test) {
+  for (auto kind : {fiber_kind::lines, fiber_kind::straight_bezier, fiber_kind::bent_bezier}) {
+    for (auto flat : {false, true}) {
+      for (auto instanced : {false, true}) {
+        auto fiber = fiber_case{kind, flat, make_fiber_kind_scene(kind, instanced)};
+        auto error = std::string{};
+        fiber.what = std::string(fiber_kind_names[(int)kind]) + (flat ? " flat" : " round") +
+                     (instanced ? " instanced" : "");
+        ASSERT_TRUE(make_scene_bvh(fiber.bvh, fiber.scene, {flat}, error)) << error;
+        test(fiber);
+      }
+    }
+  }
+}
+
 // The fibre's axis at u along the whole strand (0 to 1), in world space.
 static vec3f eval_strand_axis(const scene_data& scene, float u) {
   auto& shape = scene.shapes[0];
@@ -400,68 +425,59 @@ static float distance_to_axis(const scene_data& scene, const vec3f& point) {
 
 // A strand's ends are closed by discs across its tangent: a fibre seen
 // along its axis from either end, round or flat, lines or Beziers, instanced
-// or not, shows its whole cap (lines: maybe the half sphere Embree adds). Without the caps, Embree's round curves miss
-// every ray parallel to the axis (the hole of issue 14), and its flat
-// Beziers most of them.
+// or not, shows its whole cap (lines: maybe the half sphere Embree adds).
+// Without the caps, Embree's round curves miss every ray parallel to the
+// axis (the hole of issue 14), and its flat Beziers most of them.
 TEST(bvh, fibre_ends_are_closed_by_caps) {
-  for (auto kind : {fiber_kind::lines, fiber_kind::straight_bezier, fiber_kind::bent_bezier}) {
-    for (auto flat : {false, true}) {
-      for (auto instanced : {false, true}) {
-        auto scene = make_fiber_kind_scene(kind, instanced);
-        auto bvh   = scene_bvh{};
-        auto error = std::string{};
-        ASSERT_TRUE(make_scene_bvh(bvh, scene, {flat}, error)) << error;
-        auto& shape  = scene.shapes[0];
-        auto& frame  = scene.instances[0].frame;
-        auto  radius = 0.08f * frame_scale(frame);
-        auto  what   = std::string(fiber_kind_names[(int)kind]) + (flat ? " flat" : " round") +
-                    (instanced ? " instanced" : "");
-        for (auto end = 0; end < 2; end++) {
-          // The end point and the outward tangent there, in world space.
-          auto& p       = shape.positions;
-          auto  last    = (int)p.size() - 1;
-          auto  center  = transform_point(frame, end ? p[last] : p[0]);
-          auto  outward = normalize(transform_direction(
-              frame, end ? p[last] - p[last - 1] : p[0] - p[1]));
-          // A pinhole 3 away on the axis; rays through a grid of points of
-          // the end plane, those within the cap's disc must hit it there.
-          auto basis = basis_fromz(outward);
-          auto eye = center + outward * 3.0f, side = basis[0], up = basis[1];
-          auto inside = 0, hits = 0;
-          for (auto i = 0; i < 41; i++) {
-            for (auto j = 0; j < 41; j++) {
-              auto x = (i / 20.0f - 1) * radius, y = (j / 20.0f - 1) * radius;
-              if (x * x + y * y > radius * radius * 0.995f) continue;
-              auto target = center + side * x + up * y;
-              auto ray    = ray3f{eye, normalize(target - eye)};
-              auto hit    = intersect_scene_bvh(bvh, ray);
-              inside++;
-              if (!hit.hit) continue;
-              hits++;
-              // On the disc; for lines, maybe on the half sphere Embree puts
-              // around a line's end, up to a radius before it.
-              auto disc = distance(eye, target);
-              EXPECT_LE(hit.distance, disc + 1e-4f) << what;
-              EXPECT_GE(hit.distance, kind == fiber_kind::lines ? disc - radius * 1.001f
-                                                                : disc - 1e-4f)
-                  << what;
-              EXPECT_EQ(hit.instance, 0) << what;
-              EXPECT_EQ(hit.element, end ? (int)(shape.lines.size() + shape.curves.size()) - 1 : 0)
-                  << what;
-              EXPECT_EQ(hit.uv.x, (float)end) << what;
-              EXPECT_TRUE(intersect_scene_bvh_any(bvh, ray)) << what;
-              auto fiber = eval_fiber_point(
-                  scene, scene.instances[0], hit.element, hit.uv.x, ray, hit.distance);
-              EXPECT_NEAR(distance(fiber.axis, center), 0, 1e-3f * radius) << what;
-              EXPECT_LE(std::abs(fiber.h), 1) << what;
-              EXPECT_NEAR(std::abs(dot(fiber.tangent, outward)), 1, 1e-5f) << what;
-            }
-          }
-          EXPECT_EQ(hits, inside) << what << (end ? " end" : " start");
+  for_each_fiber_case([](const fiber_case& test_case) {
+    auto& [kind, flat, scene, bvh, what] = test_case;
+    auto& shape  = scene.shapes[0];
+    auto& frame  = scene.instances[0].frame;
+    auto  radius = 0.08f * frame_scale(frame);
+    for (auto end = 0; end < 2; end++) {
+      // The end point and the outward tangent there, in world space.
+      auto& p       = shape.positions;
+      auto  last    = (int)p.size() - 1;
+      auto  center  = transform_point(frame, end ? p[last] : p[0]);
+      auto  outward = normalize(transform_direction(
+          frame, end ? p[last] - p[last - 1] : p[0] - p[1]));
+      // A pinhole 3 away on the axis; rays through a grid of points of
+      // the end plane, those within the cap's disc must hit it there.
+      auto basis = basis_fromz(outward);
+      auto eye = center + outward * 3.0f, side = basis[0], up = basis[1];
+      auto inside = 0, hits = 0;
+      for (auto i = 0; i < 41; i++) {
+        for (auto j = 0; j < 41; j++) {
+          auto x = (i / 20.0f - 1) * radius, y = (j / 20.0f - 1) * radius;
+          if (x * x + y * y > radius * radius * 0.995f) continue;
+          auto target = center + side * x + up * y;
+          auto ray    = ray3f{eye, normalize(target - eye)};
+          auto hit    = intersect_scene_bvh(bvh, ray);
+          inside++;
+          if (!hit.hit) continue;
+          hits++;
+          // On the disc; for lines, maybe on the half sphere Embree puts
+          // around a line's end, up to a radius before it.
+          auto disc = distance(eye, target);
+          EXPECT_LE(hit.distance, disc + 1e-4f) << what;
+          EXPECT_GE(hit.distance, kind == fiber_kind::lines ? disc - radius * 1.001f
+                                                            : disc - 1e-4f)
+              << what;
+          EXPECT_EQ(hit.instance, 0) << what;
+          EXPECT_EQ(hit.element, end ? (int)(shape.lines.size() + shape.curves.size()) - 1 : 0)
+              << what;
+          EXPECT_EQ(hit.uv.x, (float)end) << what;
+          EXPECT_TRUE(intersect_scene_bvh_any(bvh, ray)) << what;
+          auto fiber = eval_fiber_point(
+              scene, scene.instances[0], hit.element, hit.uv.x, ray, hit.distance);
+          EXPECT_NEAR(distance(fiber.axis, center), 0, 1e-3f * radius) << what;
+          EXPECT_LE(std::abs(fiber.h), 1) << what;
+          EXPECT_NEAR(std::abs(dot(fiber.tangent, outward)), 1, 1e-5f) << what;
         }
       }
+      EXPECT_EQ(hits, inside) << what << (end ? " end" : " start");
     }
-  }
+  });
 }
 
 // A ray leaving a fibre (spawn_fiber_ray, as the path tracer spawns it)
@@ -474,91 +490,80 @@ TEST(bvh, fibre_ends_are_closed_by_caps) {
 // before it.
 TEST(bvh, rays_leaving_a_fibre_miss_its_own_surface) {
   auto rng = make_rng(91);
-  for (auto kind : {fiber_kind::lines, fiber_kind::straight_bezier, fiber_kind::bent_bezier}) {
-    for (auto flat : {false, true}) {
-      for (auto instanced : {false, true}) {
-        auto scene = make_fiber_kind_scene(kind, instanced);
-        auto bvh   = scene_bvh{};
-        auto error = std::string{};
-        ASSERT_TRUE(make_scene_bvh(bvh, scene, {flat}, error)) << error;
-        auto radius = 0.08f * frame_scale(scene.instances[0].frame);
-        auto what   = std::string(fiber_kind_names[(int)kind]) + (flat ? " flat" : " round") +
-                    (instanced ? " instanced" : "");
-        // Rays at the fibre: at points along it from random sides, and at
-        // its ends along its tangent (cap hits).
-        auto rays = std::vector<ray3f>{};
-        for (auto u : {0.0f, 0.01f, 0.3f, 0.5f, 0.77f, 0.99f, 1.0f}) {
-          auto axis    = eval_strand_axis(scene, u);
-          auto tangent = normalize(eval_strand_axis(scene, std::min(u + 1e-3f, 1.0f)) -
-                                   eval_strand_axis(scene, std::max(u - 1e-3f, 0.0f)));
-          if (u == 0 || u == 1) {
-            auto outward = u == 0 ? -tangent : tangent;
-            for (auto k = 0; k < 4; k++) {
-              auto offset = (rand1f(rng) - 0.5f) * radius * sample_sphere(rand2f(rng));
-              rays.push_back({axis + outward * 2.0f + offset, -outward});
-            }
-            continue;
-          }
-          for (auto k = 0; k < 6; k++) {
-            auto from = sample_sphere(rand2f(rng));
-            rays.push_back({axis + from * 2.0f, -from});
-          }
+  for_each_fiber_case([&rng](const fiber_case& test_case) {
+    auto& [kind, flat, scene, bvh, what] = test_case;
+    auto radius = 0.08f * frame_scale(scene.instances[0].frame);
+    // Rays at the fibre: at points along it from random sides, and at
+    // its ends along its tangent (cap hits).
+    auto rays = std::vector<ray3f>{};
+    for (auto u : {0.0f, 0.01f, 0.3f, 0.5f, 0.77f, 0.99f, 1.0f}) {
+      auto axis    = eval_strand_axis(scene, u);
+      auto tangent = normalize(eval_strand_axis(scene, std::min(u + 1e-3f, 1.0f)) -
+                               eval_strand_axis(scene, std::max(u - 1e-3f, 0.0f)));
+      if (u == 0 || u == 1) {
+        auto outward = u == 0 ? -tangent : tangent;
+        for (auto k = 0; k < 4; k++) {
+          auto offset = (rand1f(rng) - 0.5f) * radius * sample_sphere(rand2f(rng));
+          rays.push_back({axis + outward * 2.0f + offset, -outward});
         }
-        auto tested = 0;
-        for (auto& ray : rays) {
-          auto hit = intersect_scene_bvh(bvh, ray);
-          if (!hit.hit || hit.instance != 0) continue;
-          auto fiber = eval_fiber_point(
-              scene, scene.instances[0], hit.element, hit.uv.x, ray, hit.distance);
-          auto t = fiber.tangent, n = fiber.normal, b = normalize(cross(t, n));
-          auto directions = std::vector<vec3f>{};
-          for (auto k = 0; k < 16; k++) directions.push_back(sample_sphere(rand2f(rng)));
-          for (auto sign : {-1.0f, 1.0f}) {
-            // Along the fibre, exactly and almost.
-            for (auto tilt : {0.0f, 1e-5f, 1e-3f, 3e-2f})
-              for (auto across : {n, -n, b})
-                directions.push_back(normalize(sign * t + tilt * across));
-            // Across the surface, in its tangent plane and just off it.
-            for (auto phi : {0.0f, 0.5f, 1.2f, pif / 2})
-              for (auto off : {0.0f, 1e-3f, -1e-3f})
-                directions.push_back(
-                    normalize(std::cos(phi) * sign * t + std::sin(phi) * b + off * n));
-            // Through the fibre, as transmitted light leaves it.
-            for (auto theta : {0.0f, 0.3f, 1.0f, 1.5f})
-              directions.push_back(normalize(-n * std::cos(theta) + sign * t * std::sin(theta)));
-          }
-          for (auto& direction : directions) {
-            auto spawned = spawn_fiber_ray(fiber.axis, fiber.tangent, fiber.radius, n, direction);
-            auto again   = intersect_scene_bvh(bvh, spawned);
-            tested++;
-            if (kind != fiber_kind::bent_bezier) {
-              EXPECT_FALSE(again.hit) << what << ": a spawned ray hit its fibre at "
-                                      << again.distance;
-              EXPECT_FALSE(intersect_scene_bvh_any(bvh, spawned)) << what;
-              continue;
-            }
-            if (!again.hit) continue;
-            // A true hit on the bent fibre: on its surface (round) or
-            // within its radius (flat), and outside before it.
-            auto point = spawned.o + spawned.d * again.distance;
-            auto gap   = distance_to_axis(scene, point) - radius;
-            if (flat) {
-              // Embree draws flat curves as ray-facing quads, a little off
-              // the curve (0.5% of the radius is seen here).
-              EXPECT_LE(gap, 1e-2f * radius) << what << " at " << again.distance;
-            } else {
-              EXPECT_NEAR(gap, 0, 2e-3f * radius) << what << " at " << again.distance;
-            }
-            if (!flat) {
-              auto halfway = spawned.o + spawned.d * (again.distance / 2);
-              EXPECT_GE(distance_to_axis(scene, halfway), radius) << what;
-            }
-          }
-        }
-        EXPECT_GE(tested, 1500) << what;
+        continue;
+      }
+      for (auto k = 0; k < 6; k++) {
+        auto from = sample_sphere(rand2f(rng));
+        rays.push_back({axis + from * 2.0f, -from});
       }
     }
-  }
+    auto tested = 0;
+    for (auto& ray : rays) {
+      auto hit = intersect_scene_bvh(bvh, ray);
+      if (!hit.hit || hit.instance != 0) continue;
+      auto fiber = eval_fiber_point(
+          scene, scene.instances[0], hit.element, hit.uv.x, ray, hit.distance);
+      auto t = fiber.tangent, n = fiber.normal, b = normalize(cross(t, n));
+      auto directions = std::vector<vec3f>{};
+      for (auto k = 0; k < 16; k++) directions.push_back(sample_sphere(rand2f(rng)));
+      for (auto sign : {-1.0f, 1.0f}) {
+        // Along the fibre, exactly and almost.
+        for (auto tilt : {0.0f, 1e-5f, 1e-3f, 3e-2f})
+          for (auto across : {n, -n, b})
+            directions.push_back(normalize(sign * t + tilt * across));
+        // Across the surface, in its tangent plane and just off it.
+        for (auto phi : {0.0f, 0.5f, 1.2f, pif / 2})
+          for (auto off : {0.0f, 1e-3f, -1e-3f})
+            directions.push_back(
+                normalize(std::cos(phi) * sign * t + std::sin(phi) * b + off * n));
+        // Through the fibre, as transmitted light leaves it.
+        for (auto theta : {0.0f, 0.3f, 1.0f, 1.5f})
+          directions.push_back(normalize(-n * std::cos(theta) + sign * t * std::sin(theta)));
+      }
+      for (auto& direction : directions) {
+        auto spawned = spawn_fiber_ray(fiber.axis, fiber.tangent, fiber.radius, n, direction);
+        auto again   = intersect_scene_bvh(bvh, spawned);
+        tested++;
+        if (kind != fiber_kind::bent_bezier) {
+          EXPECT_FALSE(again.hit) << what << ": a spawned ray hit its fibre at "
+                                  << again.distance;
+          EXPECT_FALSE(intersect_scene_bvh_any(bvh, spawned)) << what;
+          continue;
+        }
+        if (!again.hit) continue;
+        // A true hit on the bent fibre: on its surface (round) or
+        // within its radius (flat), and outside before it.
+        auto point = spawned.o + spawned.d * again.distance;
+        auto gap   = distance_to_axis(scene, point) - radius;
+        if (flat) {
+          // Embree draws flat curves as ray-facing quads, a little off
+          // the curve (0.5% of the radius is seen here).
+          EXPECT_LE(gap, 1e-2f * radius) << what << " at " << again.distance;
+        } else {
+          EXPECT_NEAR(gap, 0, 2e-3f * radius) << what << " at " << again.distance;
+          auto halfway = spawned.o + spawned.d * (again.distance / 2);
+          EXPECT_GE(distance_to_axis(scene, halfway), radius) << what;
+        }
+      }
+    }
+    EXPECT_GE(tested, 1500) << what;
+  });
 }
 
 // Rays Embree would abort on (origin or direction beyond its range, NaN or
