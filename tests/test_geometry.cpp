@@ -480,6 +480,56 @@ TEST(bvh, fibre_ends_are_closed_by_caps) {
   });
 }
 
+// Strand ends meet by position: a strand written with a vertex copy per
+// segment is capped at its two ends, not at its joints, where a disc would
+// stop a ray that runs inside the fibre (as rays starting inside an
+// overlapping neighbour do). Lines and Beziers, round and flat.
+TEST(bvh, strands_with_a_vertex_copy_per_segment_are_capped_at_their_ends_only) {
+  for (auto curves : {false, true}) {
+    for (auto flat : {false, true}) {
+      auto shape = shape_data{};
+      for (auto segment = 0; segment < 3; segment++) {
+        auto start = (int)shape.positions.size();
+        auto x0 = -1.5f + segment, x1 = x0 + 1;
+        if (curves) {
+          for (auto k = 0; k < 4; k++) shape.positions.push_back({x0 + (x1 - x0) * k / 3, 0, 0});
+          shape.curves.push_back({start, start + 1, start + 2, start + 3});
+        } else {
+          shape.positions.push_back({x0, 0, 0});
+          shape.positions.push_back({x1, 0, 0});
+          shape.lines.push_back({start, start + 1});
+        }
+      }
+      shape.radius.assign(shape.positions.size(), 0.1f);
+      auto scene = scene_data{};
+      scene.shapes.push_back(shape);
+      scene.materials.push_back({});
+      scene.instances.push_back({identity3x4f, 0, 0});
+      auto bvh   = scene_bvh{};
+      auto error = std::string{};
+      ASSERT_TRUE(make_scene_bvh(bvh, scene, {flat}, error)) << error;
+      auto what = std::string(curves ? "curves" : "lines") + (flat ? " flat" : " round");
+      // Along the axis from inside: through both joints, out of the end
+      // (round fibres: a flat one has no inside, its ribbon faces the ray).
+      for (auto direction : {vec3f{1, 0, 0}, vec3f{-1, 0, 0}}) {
+        if (flat) continue;
+        auto inside = ray3f{{0, 0.02f, 0.03f}, direction};
+        EXPECT_FALSE(intersect_scene_bvh(bvh, inside).hit) << what;
+        EXPECT_FALSE(intersect_scene_bvh_any(bvh, inside)) << what;
+      }
+      // Along the axis from outside: the end's cap, on the end segment.
+      for (auto end = 0; end < 2; end++) {
+        auto ray = ray3f{{end ? 4.0f : -4.0f, 0.02f, 0.03f}, {end ? -1.0f : 1.0f, 0, 0}};
+        auto hit = intersect_scene_bvh(bvh, ray);
+        ASSERT_TRUE(hit.hit) << what;
+        EXPECT_NEAR(hit.distance, 2.5f, 0.1f) << what;
+        EXPECT_EQ(hit.element, end ? 2 : 0) << what;
+        EXPECT_EQ(hit.uv.x, (float)end) << what;
+      }
+    }
+  }
+}
+
 // A ray leaving a fibre (spawn_fiber_ray, as the path tracer spawns it)
 // never hits the fibre's own surface: from hits on its side and on its caps,
 // in random directions, at grazing directions along the fibre and across

@@ -7,8 +7,10 @@
 #include <embree3/rtcore.h>
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
+#include <cstring>
 #include <mutex>
 #include <sstream>
 #include <string>
@@ -191,37 +193,52 @@ static RTCGeometry make_curve_pieces_geometry(RTCDevice device, const shape_data
   return geometry;
 }
 
-// Strand ends: a segment end whose vertex is the end of no other segment,
-// packed as element << 1 | end (0 at u = 0, 1 at u = 1). Ends of radius zero
-// (tapered tips) and of no direction need no cap.
+// Strand ends: a segment end that meets no other segment end, packed as
+// element << 1 | end (0 at u = 0, 1 at u = 1). Ends meet by position, not
+// by vertex index, so strands written with a vertex copy per segment are
+// closed at their ends only. Ends of radius zero (tapered tips) and of no
+// direction need no cap.
 static std::vector<uint32_t> make_fiber_caps(const shape_data& shape) {
-  auto  caps  = std::vector<uint32_t>{};
-  auto  count = (int)shape.positions.size();
-  auto& p     = shape.positions;
-  auto  ends  = std::vector<uint8_t>(count, 0);
-  auto  add_caps = [&](const auto& elements) {
-    if (elements.size() >= (1u << 31)) return;
+  auto caps     = std::vector<uint32_t>{};
+  auto add_caps = [&](const auto& elements) {
+    auto& p     = shape.positions;
+    auto  count = (int)p.size();
+    if (elements.empty() || elements.size() >= (1u << 31)) return;
     auto valid = [&](const auto& element) {
       for (auto k = 0; k < (int)element.length(); k++)
         if (element[k] < 0 || element[k] >= count) return false;
       return true;
     };
+    // Every segment end with its position's bits (+0 for -0), sorted so
+    // that ends at one position are neighbours.
+    struct segment_end {
+      std::array<uint32_t, 3> position = {};
+      uint32_t                packed   = 0;
+    };
     auto last = (int)elements[0].length() - 1;
-    for (auto& element : elements) {
-      if (!valid(element)) continue;
-      ends[element[0]] = std::min(ends[element[0]] + 1, 2);
-      ends[element[last]] = std::min(ends[element[last]] + 1, 2);
-    }
+    auto ends = std::vector<segment_end>{};
     for (auto i = 0; i < (int)elements.size(); i++) {
-      auto& element = elements[i];
-      if (!valid(element)) continue;
+      if (!valid(elements[i])) continue;
       for (auto end = 0; end < 2; end++) {
-        auto vertex = element[end ? last : 0];
-        if (ends[vertex] != 1 || fiber_vertex(shape, vertex).w <= 0) continue;
-        if (length(fiber_cap_normal(p, element, end)) == 0) continue;
-        caps.push_back((uint32_t)i << 1 | end);
+        auto position = p[elements[i][end ? last : 0]] + vec3f{0, 0, 0};
+        auto bits     = std::array<uint32_t, 3>{};
+        std::memcpy(bits.data(), &position, sizeof(bits));
+        ends.push_back({bits, (uint32_t)i << 1 | end});
       }
     }
+    std::sort(ends.begin(), ends.end(),
+        [](const segment_end& a, const segment_end& b) { return a.position < b.position; });
+    for (size_t k = 0; k < ends.size(); k++) {
+      auto alone = (k == 0 || ends[k - 1].position != ends[k].position) &&
+                   (k + 1 == ends.size() || ends[k + 1].position != ends[k].position);
+      if (!alone) continue;
+      auto& element = elements[ends[k].packed >> 1];
+      auto  end     = (int)(ends[k].packed & 1);
+      if (fiber_vertex(shape, element[end ? last : 0]).w <= 0) continue;
+      if (length(fiber_cap_normal(p, element, end)) == 0) continue;
+      caps.push_back(ends[k].packed);
+    }
+    std::sort(caps.begin(), caps.end());
   };
   if (!shape.lines.empty()) add_caps(shape.lines);
   else if (!shape.curves.empty()) add_caps(shape.curves);
