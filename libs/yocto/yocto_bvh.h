@@ -25,8 +25,8 @@
 // direction (spawn_fiber_ray in yocto_scene), so it is outside its own fibre
 // and moves away from it. Flat fibres face every ray and have no inside.
 //
-// Caps. A strand is closed at each end (a segment end whose vertex ends no
-// other segment) by a flat disc across its tangent there, of the end's
+// Caps. A strand is closed at each end (a segment end at whose position no
+// other segment ends) by a flat disc across its tangent there, of the end's
 // radius, seen from outside only; a hit on it is a hit on the end segment at
 // u = 0 or 1, shaded like any hit on the fibre. Without it Embree's round
 // curves are open at the ends and miss rays along the axis, so a fibre seen
