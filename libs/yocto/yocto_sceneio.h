@@ -127,7 +127,8 @@ struct render_part {
   std::vector<fixed_sum3> sums      = {};
 };
 
-// A part's bytes a pixel before compression: R, G, B as floats, 18 halves.
+// A part's bytes a pixel before compression: R, G, B as floats, then the
+// sums as 18 32-bit words.
 inline constexpr int render_part_pixel_bytes = 84;
 
 // Saves a part as an OpenEXR image (the name must end in .exr), written as
