@@ -23,6 +23,8 @@
 #include <yocto/yocto_sceneio.h>
 #include <yocto/yocto_trace.h>
 
+#include "yocto_source_hash.h"  // generated from the sources: YOCTO_SOURCE_HASH
+
 using namespace yocto;
 
 // -----------------------------------------------------------------------------
@@ -255,6 +257,17 @@ static bool save_rescued_render(const std::string& output,
   return false;
 }
 
+// The compiler that built this program, as it names itself.
+static std::string compiler_name() {
+#if defined(__clang__)
+  return "clang " __clang_version__;
+#elif defined(__GNUC__)
+  return "gcc " __VERSION__;
+#else
+  return "unknown compiler";
+#endif
+}
+
 // What every part of one render shares, one "key=value" a line, for a merge
 // to compare: the scene's fingerprint, the camera and everything else that
 // changes a sample's value (floats with 9 digits, which round-trip). The
@@ -277,6 +290,10 @@ static std::string render_settings(const scene_data& scene, const trace_params& 
   };
   auto& camera = scene.cameras[params.camera];
   auto& frame  = camera.frame;
+  // The code that renders: the same settings on other sources, another
+  // compiler or another Embree may give other bits (fibre semantics change).
+  line("renderer", std::string(YOCTO_SOURCE_HASH) + " " + compiler_name() + " embree " +
+                       embree_version());
   line("scene", hex_string(fingerprint_scene(scene)));
   line("camera", std::to_string(params.camera));
   line("camera_frame", numbers({frame.x.x, frame.x.y, frame.x.z, frame.y.x, frame.y.y,
@@ -593,6 +610,8 @@ static int run_merge(const merge_options& options) {
       auto hint = here.rfind("isa=", 0) == 0
                       ? "; machines with different CPUs agree when every part gets the same "
                         "--embree-config max_isa=NAME"
+                  : here.rfind("renderer=", 0) == 0
+                      ? "; render every part with one build of yscene"
                       : "";
       return print_error(filename + ": not a part of the render of " + reference + ": " + here +
                          " here, " + there + " there (parts of one render share the scene "

@@ -383,6 +383,23 @@ TEST(merge, parts_that_do_not_make_one_render_are_refused) {
     expect_refused({low, other}, "--embree-config max_isa=NAME");
     fs::remove(other);
   }
+  // A part of another build of yscene (other sources, compiler or Embree):
+  // its renderer line differs, and the merge says to use one build.
+  {
+    auto part  = render_part{};
+    auto error = std::string{};
+    ASSERT_TRUE(load_render_part(high, part, error)) << error;
+    auto line = part.settings.find("renderer=");
+    ASSERT_EQ(line, 0u) << part.settings;
+    EXPECT_NE(part.settings.find(" embree "), std::string::npos) << part.settings;
+    part.settings.insert(line + 9, "0ther");
+    auto other = (fixture.dir / "otherbuild.exr").string();
+    ASSERT_TRUE(save_render_part(other, part, error)) << error;
+    expect_refused({low, other}, "otherbuild.exr: not a part of the render of");
+    expect_refused({low, other}, "renderer=0ther");
+    expect_refused({low, other}, "one build of yscene");
+    fs::remove(other);
+  }
   // Another N, and another scene (more strands) under the same settings.
   auto result = run_yscene("render " + fixture.scene + " -o " +
                            (fixture.dir / "n15.exr").string() +

@@ -399,6 +399,8 @@ std::string embree_isa(const std::string& config) {
   return names[best];
 }
 
+std::string embree_version() { return RTC_VERSION_STRING; }
+
 bool make_scene_bvh(scene_bvh& bvh, const scene_data& scene, const bvh_params& params,
     std::string& error) {
   auto start  = std::chrono::steady_clock::now();

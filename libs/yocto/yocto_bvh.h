@@ -106,6 +106,9 @@ bool make_scene_bvh(scene_bvh& bvh, const scene_data& scene, const bvh_params& p
 // bit for bit (the parts of one image) record and compare it.
 std::string embree_isa(const std::string& config);
 
+// The version of Embree this library was built with, e.g. "3.13.5".
+std::string embree_version();
+
 // Can Embree trace the ray? Origin and direction components within Embree's
 // range (it asserts beyond 1.844e18), a non-zero direction, tmin and tmax not
 // NaN. The queries below treat any other ray as a miss (as occluded for
