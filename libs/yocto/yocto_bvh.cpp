@@ -49,15 +49,25 @@ static bool embree_memory_callback(void* user, ssize_t bytes, bool) {
 // -----------------------------------------------------------------------------
 namespace yocto {
 
-// The outward direction of a strand's end (not normalized; zero when the
-// segment has no length): along the tangent at u = 1, against it at u = 0.
-static vec3f fiber_cap_normal(const std::vector<vec3f>& p, const vec2i& line, int end) {
-  return end ? p[line.y] - p[line.x] : p[line.x] - p[line.y];
-}
-static vec3f fiber_cap_normal(const std::vector<vec3f>& p, const vec4i& curve, int end) {
-  auto tangent = end ? p[curve.w] - p[curve.z] : p[curve.x] - p[curve.y];
-  if (length(tangent) > 0) return tangent;
-  return end ? p[curve.w] - p[curve.x] : p[curve.x] - p[curve.w];
+// A segment's end (0 at u = 0, 1 at u = 1): its vertex and the outward
+// direction along the fibre there (not normalized; zero when the segment has
+// no length), the tangent eval_fiber_point takes, also where a Bezier's
+// derivative is zero.
+struct fiber_end {
+  int   vertex  = 0;
+  vec3f outward = {0, 0, 0};
+};
+static fiber_end eval_fiber_end(const shape_data& shape, int element, int end) {
+  auto& p = shape.positions;
+  if (!shape.lines.empty()) {
+    auto& line = shape.lines[element];
+    return end ? fiber_end{line.y, p[line.y] - p[line.x]}
+               : fiber_end{line.x, p[line.x] - p[line.y]};
+  }
+  auto& curve   = shape.curves[element];
+  auto  outward = end ? p[curve.w] - p[curve.z] : p[curve.x] - p[curve.y];
+  if (length(outward) == 0) outward = end ? p[curve.w] - p[curve.x] : p[curve.x] - p[curve.w];
+  return {end ? curve.w : curve.x, outward};
 }
 
 // Vertices as Embree's float4 (position, radius).
@@ -232,10 +242,8 @@ static std::vector<uint32_t> make_fiber_caps(const shape_data& shape) {
       auto alone = (k == 0 || ends[k - 1].position != ends[k].position) &&
                    (k + 1 == ends.size() || ends[k + 1].position != ends[k].position);
       if (!alone) continue;
-      auto& element = elements[ends[k].packed >> 1];
-      auto  end     = (int)(ends[k].packed & 1);
-      if (fiber_vertex(shape, element[end ? last : 0]).w <= 0) continue;
-      if (length(fiber_cap_normal(p, element, end)) == 0) continue;
+      auto fiber = eval_fiber_end(shape, (int)(ends[k].packed >> 1), (int)(ends[k].packed & 1));
+      if (fiber_vertex(shape, fiber.vertex).w <= 0 || length(fiber.outward) == 0) continue;
       caps.push_back(ends[k].packed);
     }
     std::sort(caps.begin(), caps.end());
@@ -245,9 +253,8 @@ static std::vector<uint32_t> make_fiber_caps(const shape_data& shape) {
   return caps;
 }
 
-// One disc per strand end, facing out along the fibre's tangent there (the
-// direction eval_fiber_point takes, also where a Bezier's derivative is
-// zero), of the end's radius.
+// One disc per strand end, facing out along the fibre's tangent there, of
+// the end's radius.
 static RTCGeometry make_cap_geometry(
     RTCDevice device, const shape_data& shape, const std::vector<uint32_t>& caps) {
   auto geometry = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_ORIENTED_DISC_POINT);
@@ -256,16 +263,9 @@ static RTCGeometry make_cap_geometry(
   auto normals  = (vec3f*)rtcSetNewGeometryBuffer(geometry, RTC_BUFFER_TYPE_NORMAL, 0,
       RTC_FORMAT_FLOAT3, sizeof(vec3f), caps.size());
   for (auto i = 0; i < (int)caps.size(); i++) {
-    auto element = (int)(caps[i] >> 1), end = (int)(caps[i] & 1);
-    if (!shape.lines.empty()) {
-      auto& line  = shape.lines[element];
-      vertices[i] = fiber_vertex(shape, end ? line.y : line.x);
-      normals[i]  = normalize(fiber_cap_normal(shape.positions, line, end));
-    } else {
-      auto& curve = shape.curves[element];
-      vertices[i] = fiber_vertex(shape, end ? curve.w : curve.x);
-      normals[i]  = normalize(fiber_cap_normal(shape.positions, curve, end));
-    }
+    auto fiber  = eval_fiber_end(shape, (int)(caps[i] >> 1), (int)(caps[i] & 1));
+    vertices[i] = fiber_vertex(shape, fiber.vertex);
+    normals[i]  = normalize(fiber.outward);
   }
   return geometry;
 }
