@@ -561,9 +561,9 @@ static std::pair<std::string, std::string> first_difference(
     return "(no " + key + ")";
   };
   for (auto& [key, line] : lines_a)
-    if (find(lines_b, key) != line) return {line, find(lines_b, key)};
+    if (auto other = find(lines_b, key); other != line) return {line, other};
   for (auto& [key, line] : lines_b)
-    if (find(lines_a, key) != line) return {find(lines_a, key), line};
+    if (auto other = find(lines_a, key); other != line) return {other, line};
   return {"", ""};
 }
 
