@@ -346,25 +346,16 @@ TEST(bvh, rays_starting_inside_a_fibre_pass_its_wall) {
 enum struct fiber_kind { lines, straight_bezier, bent_bezier };
 static const char* fiber_kind_names[] = {"lines", "straight Bezier", "bent Bezier"};
 static scene_data make_fiber_kind_scene(fiber_kind kind, bool instanced) {
-  auto shape = shape_data{};
-  if (kind == fiber_kind::lines) {
-    shape.positions = {{-2, 0, 0}, {0, 0, 0}, {2, 0, 0}};
-    shape.lines     = {{0, 1}, {1, 2}};
-  } else {
-    auto rise       = kind == fiber_kind::bent_bezier ? 1.0f : 0.0f;
-    shape.positions = {{-2, 0, 0}, {-2.0f / 3, rise, 0}, {2.0f / 3, rise, 0}, {2, 0, 0}};
-    shape.curves    = {{0, 1, 2, 3}};
-  }
-  shape.radius.assign(shape.positions.size(), 0.08f);
-  auto scene = scene_data{};
-  scene.shapes.push_back(shape);
-  scene.materials.push_back({});
   // Instanced: turned, scaled by a half, and shared with a far copy.
   auto frame = instanced ? translation_frame({0.5f, 1, -2}) *
                                rotation_frame({0.2f, 1, 0.3f}, 0.9f) *
                                scaling_frame({0.5f, 0.5f, 0.5f})
                          : identity3x4f;
-  scene.instances.push_back({frame, 0, 0});
+  auto scene = make_straight_fiber_scene(kind != fiber_kind::lines, 0.08f, frame);
+  if (kind == fiber_kind::bent_bezier) {  // the arch: inner control points lifted
+    scene.shapes[0].positions[1].y = 1;
+    scene.shapes[0].positions[2].y = 1;
+  }
   if (instanced) scene.instances.push_back({translation_frame({50, 0, 0}), 0, 0});
   return scene;
 }
