@@ -309,10 +309,13 @@ static std::string render_settings(const scene_data& scene, const trace_params& 
   line("sobol_bounces", std::to_string(params.sobol_bounces));
   line("bounces", std::to_string(params.bounces));
   line("roulette_bounce", std::to_string(params.roulette_bounce));
+  line("roulette_threshold", number(params.roulette_threshold));
+  line("split", std::to_string(params.split));
   line("shadow_threshold", number(params.shadow_threshold));
   line("clamp", number(params.clamp));
   line("hair", std::string(params.hair_four_numbers ? "four-numbers" : "demux") +
                    (params.hair_per_hit ? " per-hit" : "") +
+                   (params.hair_mixture_weight ? " mixture-weight" : "") +
                    (params.hair_fast_pow ? " fast-pow" : ""));
   line("curves", options.curves + (options.curves == "lines"
                                         ? " " + std::to_string(options.segments) : "") +
@@ -522,11 +525,11 @@ static int run_render(const render_options& options, trace_params params,
     for (auto& shape : scene.shapes) segments += shape.lines.size() + shape.curves.size();
     std::printf("stats load_seconds=%.6f bvh_seconds=%.6f bvh_bytes=%lld segments=%zu "
                 "width=%d height=%d spp=%d render_seconds=%.6f render_cpu=%.6f rays=%lld "
-                "peak_memory=%lld clamped=%lld clamped_energy=%.6g\n",
+                "peak_memory=%lld clamped=%lld clamped_energy=%.6g roulette_threshold=%.6g\n",
         load_time, bvh.build_seconds, (long long)bvh.peak_memory, segments, state.width,
         state.height, state.samples, render_time, render_cpu, (long long)state.rays.load(),
         (long long)peak_memory(), (long long)state.clamped.load(),
-        clamped_energy_fraction(state));
+        clamped_energy_fraction(state), state.roulette_threshold);
   }
   return 0;
 }
@@ -1095,6 +1098,10 @@ static int run_main(int argc, const char** argv) {
   render->add_option("--roulette-bounce", params.roulette_bounce,
           "first bounce where Russian roulette may end a path that lost energy")
       ->check(CLI::NonNegativeNumber);
+  render->add_option("--roulette-threshold", params.roulette_threshold,
+          "paths whose throughput falls below this play Russian roulette");
+  render->add_option("--split", params.split,
+          "paths per camera ray, sharing its first hit");
   render->add_option("--shadow-threshold", params.shadow_threshold,
           "light samples that would add less than this play a roulette for their shadow ray")
       ->check(CLI::NonNegativeNumber);
@@ -1119,6 +1126,9 @@ static int run_main(int argc, const char** argv) {
       ->check(CLI::Range(1, 64));
   render->add_flag("--hair-per-hit", params.hair_per_hit,
       "compute the hair material terms at every hit (as the thesis), not once per material");
+  render->add_flag("--hair-mixture-weight", params.hair_mixture_weight,
+      "weigh sampled hair directions by eval / pdf of the lobe mixture even where no MIS needs "
+      "the pdf (by default the sampled lobe's own weight, which skips the evaluation)");
   render->add_flag("--hair-fast-pow", params.hair_fast_pow,
       "hair roughness powers by repeated squaring instead of std::pow (matters with --hair-per-hit)");
   render->add_flag("--no-flatten", render_opts.no_flatten,

@@ -533,7 +533,9 @@ fiber_point eval_fiber_point(const scene_data& scene, const instance_data& insta
   point.position = ray.o + ray.d * distance;
   point.axis     = transform_point(instance.frame, axis);
   point.tangent  = safe_normalize(transform_vector(instance.frame, tangent));
-  point.radius   = radius * frame_scale(instance.frame);
+  // The scale's cube root is skipped for the common identity frame.
+  point.radius   = instance.frame == identity3x4f ? radius
+                                                  : radius * frame_scale(instance.frame);
   if (point.tangent == vec3f{0, 0, 0}) point.tangent = {1, 0, 0};
 
   // z: the direction back to the ray origin, made orthogonal to the tangent.

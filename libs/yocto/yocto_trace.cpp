@@ -427,39 +427,58 @@ enum trace_pair {
 };
 static int trace_bounce_pairs(int bounce) { return 2 + 6 * bounce; }
 
-// The path tracer; when `record` is not null, every ray cast is appended to it.
-// A path scatters at most params.bounces times (pbrt's maxdepth): the ray
-// leaving the last scattering vertex is still traced for the emission it
-// finds, so that its MIS weight and the light sample's add up to one.
-static vec3f trace_path(const scene_data& scene, const scene_bvh& bvh,
-    const trace_context& context, const ray3f& camera_ray, sequence_state& sequence,
-    const trace_params& params, int64_t& rays, std::vector<trace_ray>* record) {
-  auto radiance  = vec3f{0, 0, 0};
-  auto weight    = vec3f{1, 1, 1};
-  auto ray       = camera_ray;
-  auto bsdf_pdf  = 0.0f;  // pdf of the last BSDF sample, 0 for camera rays
-  auto use_mis   = params.sampler == trace_sampler_type::path;
-  for (auto bounce = 0;; bounce++) {
-    auto intersection = intersect_scene_bvh(bvh, ray);
-    rays++;
-    if (record) record->push_back({ray, false});
-    if (!intersection.hit) {
-      radiance += weight * eval_environments(scene, context, ray.d, use_mis ? bsdf_pdf : 0);
-      break;
-    }
-    auto point    = eval_trace_point(scene, context, intersection, ray, params);
-    auto outgoing = -ray.d;
-    if (point.emission != vec3f{0, 0, 0}) {
-      auto mis = 1.0f;
-      if (use_mis && bsdf_pdf > 0) {
-        auto light_pdf = area_light_pdf(scene, context, intersection.instance,
-            intersection.distance, std::abs(dot(point.gnormal, outgoing)));
-        mis = power_heuristic(bsdf_pdf, light_pdf);
-      }
-      radiance += weight * point.emission * mis;
-    }
-    if (bounce >= params.bounces || scatters_nothing(point)) break;
+// A point where a pilot path played the roulette: the throughput's largest
+// component, the probability of surviving, and the radiance gathered and
+// rays cast before it (the path's tail is what comes after).
+struct trace_roulette_point {
+  float   weight  = 0;
+  float   survive = 1;
+  vec3f   radiance = {0, 0, 0};
+  int64_t rays    = 0;
+};
 
+// The lens pair, drawn only for cameras with a lens (a pinhole ignores it).
+static vec2f lens_numbers(const camera_data& camera, sequence_state& sequence) {
+  if (camera.orthographic || camera.aperture <= 0) return {0, 0};
+  return sample_sequence2f(sequence, trace_pair_lens);
+}
+
+// What every vertex of a path needs: the scene, its BVH and lights, the
+// parameters, the roulette threshold, the ray counter and, when not null,
+// the list of rays cast and (pilot paths) the roulette points met.
+struct trace_walk {
+  const scene_data&                  scene;
+  const scene_bvh&                   bvh;
+  const trace_context&               context;
+  const trace_params&                params;
+  float                              roulette_threshold;
+  int64_t&                           rays;
+  std::vector<trace_ray>*            record          = nullptr;
+  std::vector<trace_roulette_point>* roulette_points = nullptr;
+};
+
+static scene_intersection cast_closest(const trace_walk& walk, const ray3f& ray) {
+  walk.rays++;
+  if (walk.record) walk.record->push_back({ray, false});
+  return intersect_scene_bvh(walk.bvh, ray);
+}
+
+// Adds to `radiance` what a path gathers from its scattering vertex `point`,
+// reached by `ray` at `bounce` with throughput `weight`, on: next-event
+// estimation there and at every later vertex, BSDF sampling, Russian
+// roulette, and the emission that the sampled rays find. A path scatters at
+// most params.bounces times (pbrt's maxdepth): the ray leaving the last
+// scattering vertex is still traced for the emission it finds, so that its
+// MIS weight and the light sample's add up to one.
+static void scatter_path(const trace_walk& walk, trace_point point, ray3f ray, int bounce,
+    vec3f weight, sequence_state& sequence, vec3f& radiance) {
+  auto& [scene, bvh, context, params, threshold, rays, record, points] = walk;
+  auto use_mis = params.sampler == trace_sampler_type::path;
+  // MIS weighs BSDF samples that find a light that light sampling finds too:
+  // without such lights no BSDF pdf is needed.
+  auto needs_pdf = use_mis && !context.lights.empty();
+  for (;; bounce++) {
+    auto outgoing = -ray.d;
     // Next-event estimation: one light, one shadow ray.
     auto pairs = trace_bounce_pairs(bounce);
     if (use_mis && !context.lights.empty()) {
@@ -506,33 +525,96 @@ static vec3f trace_path(const scene_data& scene, const scene_bvh& bvh,
     auto more = params.hair_four_numbers && point.type == material_type::hair
                     ? sample_sequence2f(sequence, pairs + trace_pair_direction_more)
                     : vec2f{0, 0};
-    auto incoming = sample_bsdfcos(point, outgoing, lobe_roulette.x, rn, more, params);
-    if (incoming == vec3f{0, 0, 0} || !isfinite(incoming)) break;
-    auto [bsdfcos, pdf] = eval_bsdfcos_and_pdf(point, outgoing, incoming);
-    if (!(pdf > 0) || bsdfcos == vec3f{0, 0, 0}) break;
-    weight *= bsdfcos / pdf;
-    bsdf_pdf = pdf;
+    auto incoming = vec3f{0, 0, 0};
+    auto bsdf_pdf = 0.0f;  // 0 when no MIS weight will need it
+    if (point.type == material_type::hair && !needs_pdf && !params.hair_four_numbers &&
+        !params.hair_mixture_weight) {
+      // No pdf needed: the sampled lobe's own weight, no evaluation.
+      auto sample = sample_hair_scattering_weight(point.hair, outgoing, rn);
+      incoming    = sample.incoming;
+      if (incoming == vec3f{0, 0, 0} || !isfinite(incoming)) break;
+      if (sample.weight == vec3f{0, 0, 0}) break;
+      weight *= sample.weight;
+    } else {
+      incoming = sample_bsdfcos(point, outgoing, lobe_roulette.x, rn, more, params);
+      if (incoming == vec3f{0, 0, 0} || !isfinite(incoming)) break;
+      auto [bsdfcos, pdf] = eval_bsdfcos_and_pdf(point, outgoing, incoming);
+      if (!(pdf > 0) || bsdfcos == vec3f{0, 0, 0}) break;
+      weight *= bsdfcos / pdf;
+      bsdf_pdf = pdf;
+    }
     if (!isfinite(weight)) break;
 
-    // Russian roulette from params.roulette_bounce on (1 by default: on the
-    // benchmark scenes as efficient as 3 or better, 10-17% on the fur ball and
-    // the locks), only on paths that lost energy: a path that carries all of
-    // it (a white fiber) would gain variance and nothing else (as pbrt does).
-    // Unbiased either way.
-    auto survive = max_component(weight);
-    if (bounce >= params.roulette_bounce && survive < 1) {
-      if (lobe_roulette.y >= survive) break;
-      weight /= survive;
+    // Russian roulette from params.roulette_bounce on, only on paths whose
+    // throughput fell below params.roulette_threshold: they survive with
+    // probability throughput / threshold and are weighted up when they do
+    // (unbiased). A path that carries all of its energy (a white fiber)
+    // would gain variance and nothing else.
+    auto survive = max_component(weight) / walk.roulette_threshold;
+    if (bounce >= params.roulette_bounce) {
+      if (walk.roulette_points)
+        walk.roulette_points->push_back(
+            {max_component(weight), std::min(survive, 1.0f), radiance, rays});
+      if (survive < 1) {
+        if (lobe_roulette.y >= survive) break;
+        weight /= survive;
+      }
     }
-    ray = spawn_ray(point, incoming);
+    ray               = spawn_ray(point, incoming);
+    auto intersection = cast_closest(walk, ray);
+    if (!intersection.hit) {
+      radiance += weight * eval_environments(scene, context, ray.d, use_mis ? bsdf_pdf : 0);
+      break;
+    }
+    point = eval_trace_point(scene, context, intersection, ray, params);
+    if (point.emission != vec3f{0, 0, 0}) {
+      auto mis = 1.0f;
+      if (use_mis && bsdf_pdf > 0) {
+        auto light_pdf = area_light_pdf(scene, context, intersection.instance,
+            intersection.distance, std::abs(dot(point.gnormal, -ray.d)));
+        mis = power_heuristic(bsdf_pdf, light_pdf);
+      }
+      radiance += weight * point.emission * mis;
+    }
+    if (bounce + 1 >= params.bounces || scatters_nothing(point)) break;
   }
-  return radiance;
+}
+
+// The path tracer from a camera ray. With params.split > 1 the camera ray
+// and its hit are shared by that many paths from the first scattering vertex
+// on, each weighing 1 / split; path k of sample s draws its numbers as sample
+// s * split + k would, so the split paths of samples first ... end - 1 take
+// exactly the points first * split ... end * split - 1 of every pair of
+// dimensions past the camera's (stratified together, and any sample range
+// still renders alone).
+static vec3f trace_path(const trace_walk& walk, const ray3f& camera_ray,
+    sequence_state& sequence) {
+  auto& [scene, bvh, context, params, threshold, rays, record, points] = walk;
+  auto intersection = cast_closest(walk, camera_ray);
+  if (!intersection.hit) return eval_environments(scene, context, camera_ray.d, 0);
+  auto point    = eval_trace_point(scene, context, intersection, camera_ray, params);
+  auto radiance = point.emission;  // camera rays take no MIS weight
+  if (params.bounces < 1 || scatters_nothing(point)) return radiance;
+  auto split = std::max(params.split, 1);
+  if (split == 1) {
+    scatter_path(walk, point, camera_ray, 0, {1, 1, 1}, sequence, radiance);
+    return radiance;
+  }
+  auto sample = sequence.index;
+  auto sum    = vec3f{0, 0, 0};
+  for (auto k = 0; k < split; k++) {
+    sequence.index = sample * (uint32_t)split + (uint32_t)k;
+    scatter_path(walk, point, camera_ray, 0, {1, 1, 1}, sequence, sum);
+  }
+  sequence.index = sample;
+  return radiance + sum / (float)split;
 }
 
 vec3f trace_radiance(const scene_data& scene, const scene_bvh& bvh,
     const trace_context& context, const ray3f& ray, sequence_state& sequence,
     const trace_params& params, int64_t& rays) {
-  return trace_path(scene, bvh, context, ray, sequence, params, rays, nullptr);
+  auto threshold = params.roulette_threshold > 0 ? params.roulette_threshold : 1.0f;
+  return trace_path({scene, bvh, context, params, threshold, rays}, ray, sequence);
 }
 
 }  // namespace yocto
@@ -551,6 +633,13 @@ bool check_trace_params(const scene_data& scene, const trace_params& params,
     return error = "resolution must be in [1, 65536]", false;
   if (params.samples < 1) return error = "samples must be at least 1", false;
   if (params.bounces < 1) return error = "bounces must be at least 1", false;
+  if (params.split < 1 || params.split > 1024)
+    return error = "split must be in [1, 1024]", false;
+  // Split paths number their samples sample * split + k in 32 bits.
+  if ((int64_t)params.samples * params.split > ((int64_t)1 << 32))
+    return error = "samples times split must stay below 2^32", false;
+  if (!(params.roulette_threshold >= 0) || !std::isfinite(params.roulette_threshold))
+    return error = "roulette threshold must be 0 (automatic) or positive", false;
   if (!(params.clamp >= 0)) return error = "clamp must be 0 (none) or positive", false;
   if (params.threads < 0) return error = "threads must be 0 (all) or positive", false;
   return true;
@@ -575,6 +664,7 @@ void init_trace_state(trace_state& state, const scene_data& scene, const trace_p
   state.row_clamped.assign(size.y, 0.0);
   state.rays      = 0;
   state.nonfinite = 0;
+  state.roulette_threshold = 0;
 }
 
 
@@ -595,6 +685,105 @@ static void parallel_chunks(int64_t size, int64_t grain, int threads, Func&& fun
   });
 }
 
+// The roulette threshold of a render, from a pilot: Rath et al. 2022
+// (Efficiency-Aware Russian Roulette and Splitting, EARS) give a path of
+// throughput w the survival probability q = w sqrt(E[L^2] / c) /
+// sqrt(V / C) that maximises the efficiency of the image (1 / (MSE x cost)),
+// where L is the radiance the path's tail brings per unit of throughput and c
+// its cost, V and C the variance and cost of a pixel sample. With one global
+// estimate of each, q = w / threshold for threshold = sqrt(V / C) /
+// sqrt(E[L^2] / c), costs in rays. The pilot renders two sets of 8 samples
+// of up to 4,096 pixels on a grid (a pure function of the scene, the
+// parameters and the seed, so that every part of a render finds the same
+// threshold), with a threshold of 0.5 (between the extremes of the benchmark
+// scenes); the spread of the two sets' means gives V as the render's
+// stratified numbers make it. The tails are those of the pilot's own
+// roulette, each weighted by the inverse of its survival probability.
+float estimate_roulette_threshold(const scene_data& scene, const scene_bvh& bvh,
+    const trace_context& context, const trace_params& params) {
+  auto size   = camera_resolution(scene.cameras[params.camera], params.resolution);
+  // At most 1% of the render's samples (2 x 8 on 64 to 4,096 pixels).
+  auto pilot_samples = 8, pilot_pixels = (int)std::clamp(
+      (double)size.x * size.y * params.samples / 1600, 64.0, 4096.0);
+  auto pilot_threshold = 0.5f;
+  auto stride = std::max(1, (int)std::sqrt((double)size.x * size.y / pilot_pixels));
+  auto nx = std::max(size.x / stride, 1), ny = std::max(size.y / stride, 1);
+  auto pilot  = params;
+  pilot.split = 1;
+  auto& camera = scene.cameras[params.camera];
+  // Per grid row: squared difference of the two sets' pixel means, pixels,
+  // rays, samples, tail second moment, tail rays and roulette points; added
+  // in row order.
+  auto rows = std::vector<std::array<double, 7>>(ny);
+  parallel_chunks(ny, 1, params.threads, [&](int64_t begin, int64_t end) {
+    auto points = std::vector<trace_roulette_point>{};
+    for (auto row = begin; row < end; row++) {
+      auto& sums = rows[row];
+      sums       = {};
+      auto j     = std::min((int)row * stride + stride / 2, size.y - 1);
+      for (auto column = 0; column < nx; column++) {
+        auto i     = std::min(column * stride + stride / 2, size.x - 1);
+        auto pixel = (int64_t)j * size.x + i;
+        // Two sets of samples with independent scrambles: the spread of
+        // their means is the variance of a pixel as the render's numbers
+        // stratify it, not as independent ones would.
+        glm::dvec3 means[2];
+        for (auto set = 0; set < 2; set++) {
+          auto seed = hash_uint64(params.seed ^ (0x70696c6f74ULL + (uint64_t)set));  // "pilot"
+          auto sum  = glm::dvec3{0, 0, 0};
+          for (auto s = 0; s < pilot_samples; s++) {
+            auto rays     = (int64_t)0;
+            auto walk     = trace_walk{scene, bvh, context, pilot, pilot_threshold, rays,
+                nullptr, &points};
+            auto sequence = make_sequence(pilot.sequence, seed, pixel, (uint32_t)s,
+                trace_bounce_pairs(pilot.sobol_bounces));
+            auto puv = sample_sequence2f(sequence, trace_pair_pixel);
+            auto luv = lens_numbers(camera, sequence);
+            auto ray = eval_camera(camera, {(i + puv.x) / size.x, (j + puv.y) / size.y}, luv);
+            if (!is_traceable_ray(ray)) continue;
+            points.clear();
+            auto radiance = trace_path(walk, ray, sequence);
+            if (!isfinite(radiance)) continue;
+            sum += glm::dvec3(radiance);
+            sums[2] += (double)rays;
+            sums[3] += 1;
+            for (auto& point : points) {
+              // The tail as if no roulette had been played at this point:
+              // its squared radiance per unit of throughput and its rays,
+              // weighted by the inverse probability of having survived it
+              // (zero if it did not).
+              if (!(point.weight > 0) || !(point.survive > 0)) continue;
+              auto tail = glm::dvec3(radiance - point.radiance) / (double)point.weight;
+              sums[4] += point.survive * (tail.x * tail.x + tail.y * tail.y + tail.z * tail.z) / 3;
+              sums[5] += (double)(rays - point.rays) / point.survive;
+              sums[6] += 1;
+            }
+          }
+          means[set] = sum / (double)pilot_samples;
+        }
+        auto difference = means[0] - means[1];
+        sums[0] += glm::dot(difference, difference) / 3;
+        sums[1] += 1;
+      }
+    }
+  });
+  auto totals = std::array<double, 7>{};
+  for (auto& sums : rows)
+    for (auto k = 0; k < 7; k++) totals[k] += sums[k];
+  if (!(totals[1] > 0 && totals[3] > 0 && totals[6] > 0)) return 1;
+  // Var(mean A - mean B) = 2 V / n for V the variance of one sample.
+  auto pixel_variance = pilot_samples * totals[0] / totals[1] / 2;
+  auto pixel_cost     = totals[2] / totals[3];
+  auto tail_moment = totals[4] / totals[6], tail_cost = totals[5] / totals[6];
+  if (!(tail_moment > 0) || !(tail_cost > 0)) return 1;
+  auto threshold = std::sqrt(pixel_variance / pixel_cost) / std::sqrt(tail_moment / tail_cost);
+  if (std::getenv("YOCTO_PILOT_DEBUG"))
+    std::fprintf(stderr, "pilot V=%g C=%g M=%g c=%g points=%g threshold=%g\n", pixel_variance,
+        pixel_cost, tail_moment, tail_cost, totals[6], threshold);
+  if (!std::isfinite(threshold)) return 1;
+  return (float)std::clamp(threshold, 1.0 / 16, 1.0);
+}
+
 // Adds `count` samples to every pixel of the image rows; with `records`, the
 // rays of row j go to (*records)[j].
 static void trace_rows(trace_state& state, const scene_data& scene, const scene_bvh& bvh,
@@ -605,6 +794,7 @@ static void trace_rows(trace_state& state, const scene_data& scene, const scene_
     auto rays = (int64_t)0, nonfinite = (int64_t)0, clamped = (int64_t)0;
     auto energy = 0.0, clamped_energy = 0.0;
     auto record = records ? &(*records)[j] : nullptr;
+    auto walk   = trace_walk{scene, bvh, context, params, state.roulette_threshold, rays, record};
     for (auto i = 0; i < state.width; i++) {
       auto pixel = j * state.width + i;
       auto& sum  = state.sums[pixel];
@@ -613,7 +803,7 @@ static void trace_rows(trace_state& state, const scene_data& scene, const scene_
         auto sequence = make_sequence(params.sequence, params.seed, pixel, (uint32_t)s,
             trace_bounce_pairs(params.sobol_bounces));
         auto puv      = sample_sequence2f(sequence, trace_pair_pixel);
-        auto luv      = sample_sequence2f(sequence, trace_pair_lens);
+        auto luv      = lens_numbers(camera, sequence);
         auto uv       = vec2f{(i + puv.x) / state.width, (j + puv.y) / state.height};
         auto ray      = eval_camera(camera, uv, luv);
         // validate_scene checked the camera; a ray that round-off still
@@ -622,7 +812,7 @@ static void trace_rows(trace_state& state, const scene_data& scene, const scene_
           nonfinite++;
           continue;
         }
-        auto radiance = trace_path(scene, bvh, context, ray, sequence, params, rays, record);
+        auto radiance = trace_path(walk, ray, sequence);
         if (!isfinite(radiance)) {
           nonfinite++;
           continue;
@@ -657,8 +847,18 @@ static void trace_rows(trace_state& state, const scene_data& scene, const scene_
   state.samples += count;
 }
 
+// The render's roulette threshold: the parameter's, or the pilot's (once).
+static void init_roulette_threshold(trace_state& state, const scene_data& scene,
+    const scene_bvh& bvh, const trace_context& context, const trace_params& params) {
+  if (state.roulette_threshold > 0) return;
+  state.roulette_threshold = params.roulette_threshold > 0
+                                 ? params.roulette_threshold
+                                 : estimate_roulette_threshold(scene, bvh, context, params);
+}
+
 void trace_samples(trace_state& state, const scene_data& scene, const scene_bvh& bvh,
     const trace_context& context, const trace_params& params, int count) {
+  init_roulette_threshold(state, scene, bvh, context, params);
   trace_rows(state, scene, bvh, context, params, count, nullptr);
 }
 
@@ -695,6 +895,7 @@ std::vector<trace_ray> record_trace_rays(trace_state& state, const scene_data& s
     const scene_bvh& bvh, const trace_context& context, const trace_params& params,
     int count) {
   auto records = std::vector<std::vector<trace_ray>>(state.height);
+  init_roulette_threshold(state, scene, bvh, context, params);
   trace_rows(state, scene, bvh, context, params, count, &records);
   auto size = (size_t)0;
   for (auto& record : records) size += record.size();

@@ -47,6 +47,11 @@ struct trace_params {
   int                samples    = 64;
   int                bounces    = 32;    // scattering events per path (pbrt maxdepth)
   int                roulette_bounce = 1;  // first bounce with Russian roulette
+  // Paths whose throughput falls below this play the roulette; 0 for the
+  // render's own, estimated by a pilot (estimate_roulette_threshold).
+  float              roulette_threshold = 0;
+  // Paths per camera ray, sharing its hit (splitting at the first vertex).
+  int                split      = 1;
   // Sky samples that would add less than this times the sky's average
   // radiance play a roulette for their shadow ray (0 for none).
   float              shadow_threshold = 0.1f;
@@ -58,6 +63,9 @@ struct trace_params {
   bool               hair_four_numbers = false;  // 4 independent numbers, no demux
   bool               hair_per_hit = false;  // material terms at every hit (as the thesis)
   bool               hair_fast_pow = false;  // beta^20, beta^22 by squaring, not std::pow
+  // Weigh sampled hair directions by eval / pdf of the lobe mixture even
+  // where no MIS needs the pdf (otherwise the lobe's own A_p / P(p)).
+  bool               hair_mixture_weight = false;
 };
 
 }  // namespace yocto
@@ -117,6 +125,7 @@ struct trace_state {
   std::atomic<int64_t>       clamped        = 0;
   std::vector<double>        row_energy     = {};
   std::vector<double>        row_clamped    = {};
+  float                      roulette_threshold = 0;  // the render's, 0 until set
 };
 
 // The fraction of the samples' energy that clamping removed so far.
@@ -130,6 +139,13 @@ bool check_trace_params(const scene_data& scene, const trace_params& params,
 // image get_image returns and the 8-bit copy a png or jpg save makes. Callers
 // check it against their memory budget before init_trace_state.
 double trace_image_bytes(const scene_data& scene, const trace_params& params);
+
+// The roulette threshold that maximises the render's efficiency, from a
+// pilot of a few samples on a grid of pixels (see the .cpp); trace_samples
+// calls it once per render when params.roulette_threshold is 0. The same for
+// the same scene, parameters and seed, whatever the threads and sample range.
+float estimate_roulette_threshold(const scene_data& scene, const scene_bvh& bvh,
+    const trace_context& context, const trace_params& params);
 
 // Empty sums for the camera's image; the samples will start at `first`.
 void init_trace_state(trace_state& state, const scene_data& scene, const trace_params& params,

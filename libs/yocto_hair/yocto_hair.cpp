@@ -466,25 +466,28 @@ vec3f sample_hair_scattering(
   return sample_hair_scattering(brdf, outgoing, vec4f{u0.x, u0.y, u1.x, u1.y});
 }
 
-vec3f sample_hair_scattering(
-    const hair_brdf& brdf, const vec3f& outgoing, const vec4f& rn) {
-  auto& mat   = brdf.material;
-  auto  wo      = make_angles(brdf, outgoing);
-  auto  storage = hair_lobes{};
-  auto& lobes   = find_lobes(brdf, outgoing, wo, storage);
-
-  // Lobe p with probability a_pdf[p].
-  auto p = 0, last = -1;
+// The lobe chosen by u: p with probability a_pdf[p]; -1 if the fiber
+// returns nothing.
+static int sample_hair_lobe(const hair_lobes& lobes, float u) {
+  auto last = -1;
   for (auto q = 0; q < 4; q++) {
     if (lobes.a_pdf[q] > 0) last = q;
   }
-  if (last < 0) return {0, 0, 0};
-  auto u = rn.x;
-  for (p = 0; p < last; p++) {
+  if (last < 0) return -1;
+  auto p = 0;
+  for (; p < last; p++) {
     if (u < lobes.a_pdf[p]) break;
     u -= lobes.a_pdf[p];
   }
+  return p;
+}
 
+// A direction of lobe p, drawn with density M_p N_p (exactly, so that
+// A_p / P(p) is an unbiased weight for it): rn.y the azimuth, rn.z the
+// longitudinal angle, rn.w the rotation around the longitudinal cone.
+static vec3f sample_hair_lobe_direction(const hair_brdf& brdf, const hair_lobes& lobes,
+    const hair_angles& wo, int p, const vec4f& rn) {
+  auto& mat = brdf.material;
   // d'Eon 2013: cos(theta) = 1 + v log(u + (1 - u) e^{-2/v}) around the
   // (tilted) outgoing cone; written as t = 1 - cos(theta) with log1p so that
   // sin(theta) = sqrt(t (2 - t)) keeps its digits at low roughness.
@@ -513,6 +516,29 @@ vec3f sample_hair_scattering(
   auto sin_phi_i = sin_phi_o * cos_dphi + cos_phi_o * sin_dphi;
   return brdf.x * sin_theta_i + brdf.y * (cos_theta_i * cos_phi_i) +
          brdf.z * (cos_theta_i * sin_phi_i);
+}
+
+vec3f sample_hair_scattering(
+    const hair_brdf& brdf, const vec3f& outgoing, const vec4f& rn) {
+  auto  wo      = make_angles(brdf, outgoing);
+  auto  storage = hair_lobes{};
+  auto& lobes   = find_lobes(brdf, outgoing, wo, storage);
+  auto  p       = sample_hair_lobe(lobes, rn.x);
+  if (p < 0) return {0, 0, 0};
+  return sample_hair_lobe_direction(brdf, lobes, wo, p, rn);
+}
+
+hair_sample sample_hair_scattering_weight(
+    const hair_brdf& brdf, const vec3f& outgoing, const vec2f& rn) {
+  auto u0 = demux_hair_sample_filled(rn.x), u1 = demux_hair_sample_filled(rn.y);
+  auto  numbers = vec4f{u0.x, u0.y, u1.x, u1.y};
+  auto  wo      = make_angles(brdf, outgoing);
+  auto  storage = hair_lobes{};
+  auto& lobes   = find_lobes(brdf, outgoing, wo, storage);
+  auto  p       = sample_hair_lobe(lobes, numbers.x);
+  if (p < 0) return {};
+  return {sample_hair_lobe_direction(brdf, lobes, wo, p, numbers),
+      lobes.a[p] / lobes.a_pdf[p]};
 }
 
 }  // namespace yocto

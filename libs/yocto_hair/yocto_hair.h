@@ -130,6 +130,23 @@ vec3f sample_hair_scattering(
 vec3f sample_hair_scattering(
     const hair_brdf& brdf, const vec3f& outgoing, const vec4f& rn);
 
+// A sampled direction with the weight of the lobe that drew it.
+struct hair_sample {
+  vec3f incoming = {0, 0, 0};  // zero if the fiber returns nothing
+  vec3f weight   = {0, 0, 0};
+};
+
+// The direction sample_hair_scattering draws from the same two numbers,
+// with the weight A_p / P(p) of the lobe p it came from: each lobe's
+// directions are drawn with density exactly M_p N_p, so this weight has the
+// expectation of eval / pdf (the one-sample estimator of the lobe mixture)
+// and costs no evaluation of M_p or N_p. Its luminance is the same constant
+// (sum of the lobes' luminances) as that of eval / pdf, since the lobe is
+// chosen by luminance. For a path tracer that needs no pdf of the direction
+// (no multiple importance sampling against a light).
+hair_sample sample_hair_scattering_weight(
+    const hair_brdf& brdf, const vec3f& outgoing, const vec2f& rn);
+
 // Solid-angle pdf of sample_hair_scattering.
 float sample_hair_scattering_pdf(
     const hair_brdf& brdf, const vec3f& outgoing, const vec3f& incoming);
