@@ -777,9 +777,6 @@ float estimate_roulette_threshold(const scene_data& scene, const scene_bvh& bvh,
   auto tail_moment = totals[4] / totals[6], tail_cost = totals[5] / totals[6];
   if (!(tail_moment > 0) || !(tail_cost > 0)) return 1;
   auto threshold = std::sqrt(pixel_variance / pixel_cost) / std::sqrt(tail_moment / tail_cost);
-  if (std::getenv("YOCTO_PILOT_DEBUG"))
-    std::fprintf(stderr, "pilot V=%g C=%g M=%g c=%g points=%g threshold=%g\n", pixel_variance,
-        pixel_cost, tail_moment, tail_cost, totals[6], threshold);
   if (!std::isfinite(threshold)) return 1;
   return (float)std::clamp(threshold, 1.0 / 16, 1.0);
 }

@@ -11,6 +11,15 @@
 // only on (seed, pixel, sample index): images do not depend on the number of
 // threads, and any range of samples renders alone.
 //
+// Paths end by Russian roulette once their throughput falls below a
+// threshold that a pilot chooses per render for the image's efficiency
+// (Rath et al. 2022, EARS, with one global estimate of each term: see
+// estimate_roulette_threshold); the pilot is a pure function of the scene,
+// the parameters and the seed, so every part of a split render finds the same
+// threshold. Where no MIS weight needs a BSDF pdf (no light to sample), a
+// sampled hair direction takes its lobe's own weight A_p / P(p), and the
+// lobes are not evaluated.
+//
 
 #ifndef YOCTO_TRACE_H_
 #define YOCTO_TRACE_H_

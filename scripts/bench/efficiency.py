@@ -48,25 +48,29 @@ SCENES = {
 # default back (or changes the hair's random numbers, for the thesis's claim).
 VARIANTS = [
     ("before", "before", []),
-    ("before-naive", "before", ["--sampler", "naive"]),
     ("after", "after", []),
     ("after-independent", "after", ["--sequence", "independent"]),
+    ("after-roulette-1", "after", ["--roulette-threshold", "1"]),
+    ("after-mixture-weight", "after", ["--hair-mixture-weight"]),
     ("after-lights-all", "after", ["--lights", "all"]),
     ("after-whole-curves", "after", ["--curve-pieces", "1"]),
     ("after-shadow-0", "after", ["--shadow-threshold", "0"]),
-    ("after-roulette-3", "after", ["--roulette-bounce", "3"]),
+    ("after-split-2", "after", ["--split", "2"]),
     ("after-four-sobol", "after", ["--hair-four-numbers"]),
     ("after-four-independent", "after", ["--hair-four-numbers", "--sequence", "independent"]),
 ]
 # The two defaults are timed --headline-runs times, the levers --runs times.
 HEADLINE = ["before", "after"]
-# What each lever is, as the variant that turns it back.
+# What each lever is, as the variant that turns it back (or, for splitting,
+# the variant that turns it on: below 1, it does not pay).
 LEVERS = [
     ("Sobol numbers (against independent ones)", "after-independent"),
+    ("roulette threshold from the pilot (against 1, the previous roulette)", "after-roulette-1"),
+    ("hair lobe weights where no MIS needs the pdf (against eval / pdf)", "after-mixture-weight"),
     ("light choice: constant sky to BSDF sampling, MIS compensation", "after-lights-all"),
     ("bent curves in exact pieces", "after-whole-curves"),
     ("shadow-ray roulette", "after-shadow-0"),
-    ("Russian roulette from bounce 1 (against 3)", "after-roulette-3"),
+    ("no splitting at the first hit (against 2 paths per camera ray)", "after-split-2"),
 ]
 CHECKPOINTS = [16, 64, 256]
 
