@@ -692,6 +692,226 @@ TEST(hair, sampling_consistency) {
 }
 
 // -----------------------------------------------------------------------------
+// SAMPLED LOBE WEIGHTS
+// -----------------------------------------------------------------------------
+
+// A random hit for the lobe weight tests: material by melanin (most often),
+// sigma_a or colour; beta_m, beta_n in [0.01, 1], alpha in [0, 10] degrees,
+// eta in [1.0001, 2]; h uniform or at the edges +-1; a random frame and a hard
+// outgoing direction (grazing ones included). The brdf caches the lobes of
+// outgoing when `cached`.
+struct weight_case {
+  hair_material material = {};
+  hair_brdf     brdf     = {};
+  vec3f         outgoing = {0, 0, 0};
+};
+static weight_case random_weight_case(rng_state& rng, bool cached) {
+  auto  test           = weight_case{};
+  auto& material       = test.material;
+  material.eumelanin   = 3 * rand1f(rng);
+  material.pheomelanin = rand1f(rng) < 0.3f ? 2 * rand1f(rng) : 0;
+  material.beta_m      = 0.01f + 0.99f * rand1f(rng);
+  material.beta_n      = 0.01f + 0.99f * rand1f(rng);
+  material.alpha       = 10 * rand1f(rng);
+  material.eta         = rand1f(rng) < 0.1f ? 1.0001f : 1 + rand1f(rng);
+  auto kind            = rand1i(rng, 5);
+  if (kind == 0) {
+    material.has_sigma_a = true;
+    material.sigma_a     = {2 * rand1f(rng), 2 * rand1f(rng), 4 * rand1f(rng)};
+  } else if (kind == 1) {
+    material.has_color = true;
+    material.color     = {rand1f(rng), rand1f(rng), rand1f(rng)};
+  }
+  auto h        = rand1i(rng, 8) == 0 ? (rand1f(rng) < 0.5f ? -1.0f : 1.0f) : 2 * rand1f(rng) - 1;
+  auto frame    = frame_fromz({0, 0, 0}, sample_sphere(rand2f(rng)));
+  test.outgoing = transform_direction(frame, hard_direction(rng));
+  auto pre      = make_hair_precomputed(material);
+  test.brdf     = cached ? eval_hair_brdf(pre, h, frame, test.outgoing)
+                         : eval_hair_brdf(pre, h, frame);
+  return test;
+}
+
+TEST(hair, lobe_weight_sample_draws_the_same_direction) {
+  // 200k random hits (random_weight_case, half with cached lobes; fixed seed)
+  // and random numbers, an eighth of them at 0 or just below 1:
+  // sample_hair_scattering_weight returns exactly (bit for bit) the direction
+  // sample_hair_scattering returns for the same two numbers, a zero weight
+  // with a zero direction, and a finite non-negative weight otherwise. A
+  // fiber that returns nothing (eta 1: no reflection; sigma_a 1e4: no
+  // transmission) gives a zero direction and weight.
+  auto rng      = make_rng(2024);
+  auto failures = 0, zero = 0;
+  const auto count = 200000;
+  for (auto i = 0; i < count && failures < 10; i++) {
+    auto test = random_weight_case(rng, i % 2 == 0);
+    auto rn   = rand2f(rng);
+    if (rand1i(rng, 8) == 0) {
+      rn = {rand1f(rng) < 0.5f ? 0.0f : std::nextafter(1.0f, 0.0f), rn.y};
+      if (rand1f(rng) < 0.5f) std::swap(rn.x, rn.y);
+    }
+    auto sample    = sample_hair_scattering_weight(test.brdf, test.outgoing, rn);
+    auto incoming  = sample_hair_scattering(test.brdf, test.outgoing, rn);
+    auto no_sample = incoming == vec3f{0, 0, 0};
+    if (no_sample) zero++;
+    auto ok = sample.incoming == incoming && isfinite(sample.weight) &&
+              min_component(sample.weight) >= 0 &&
+              (!no_sample || sample.weight == vec3f{0, 0, 0});
+    if (!ok && failures++ < 10) {
+      ADD_FAILURE() << "sample " << i << ": weight sample (" << sample.incoming.x << ", "
+                    << sample.incoming.y << ", " << sample.incoming.z << ") plain ("
+                    << incoming.x << ", " << incoming.y << ", " << incoming.z
+                    << ") weight (" << sample.weight.x << ", " << sample.weight.y << ", "
+                    << sample.weight.z << ")";
+    }
+  }
+  std::printf("[ figure ] lobe weight sampler: %d directions compared, %d zero, %d "
+              "differences\n", count, zero, failures);
+  EXPECT_EQ(failures, 0);
+  EXPECT_LT(zero, count / 100);  // the comparison is not vacuous
+  auto black    = white_material(0.3f, 0.3f);
+  black.eta     = 1;
+  black.sigma_a = {1e4f, 1e4f, 1e4f};
+  auto brdf     = eval_hair_brdf(black, 0.2f, frame3f{});
+  auto outgoing = normalize(vec3f{0.3f, 0.2f, 1});
+  auto sample   = sample_hair_scattering_weight(brdf, outgoing, {0.3f, 0.6f});
+  EXPECT_EQ(sample.incoming, (vec3f{0, 0, 0}));
+  EXPECT_EQ(sample.weight, (vec3f{0, 0, 0}));
+  EXPECT_EQ(sample_hair_scattering(brdf, outgoing, vec2f{0.3f, 0.6f}), (vec3f{0, 0, 0}));
+}
+
+TEST(hair, lobe_weight_luminance_equals_eval_over_pdf_luminance) {
+  // Lobes are chosen by the luminance of A_p, so per sample
+  // luminance(A_p / P(p)) = sum_q luminance(A_q) = luminance(eval / pdf) at
+  // the sampled direction (eval = sum M N A, pdf = sum M N P). 200k random
+  // hits (random_weight_case, fixed seed); relative tolerance 1e-3; samples
+  // with pdf 0 are skipped (and counted, to show the check is not vacuous).
+  // Also: the per-channel weight is not always eval / pdf's (the weights
+  // differ by lobe, eval / pdf mixes them), else this test would be trivial.
+  auto rng      = make_rng(77);
+  auto failures = 0, compared = 0, differing = 0;
+  auto worst    = 0.0;
+  const auto count = 200000;
+  for (auto i = 0; i < count && failures < 10; i++) {
+    auto test   = random_weight_case(rng, i % 2 == 1);
+    auto sample = sample_hair_scattering_weight(test.brdf, test.outgoing, rand2f(rng));
+    if (sample.incoming == vec3f{0, 0, 0}) continue;
+    auto [f, pdf] = eval_hair_scattering_and_pdf(test.brdf, test.outgoing, sample.incoming);
+    if (!(pdf > 0)) continue;
+    compared++;
+    auto mixture  = f / pdf;
+    auto expected = (double)luminance(mixture), value = (double)luminance(sample.weight);
+    auto error    = std::abs(value - expected) / std::max(expected, 1e-30);
+    worst         = std::max(worst, error);
+    if (max_component(abs(sample.weight - mixture)) > 1e-3f * max_component(mixture))
+      differing++;
+    if (!(error <= 1e-3) && failures++ < 10) {
+      ADD_FAILURE() << "sample " << i << ": luminance of weight " << value
+                    << ", of eval / pdf " << expected << " (pdf " << pdf << ") beta "
+                    << test.material.beta_m << " " << test.material.beta_n << " h "
+                    << test.brdf.h << " eta " << test.material.eta;
+    }
+  }
+  std::printf("[ figure ] lobe weight luminance: %d samples compared, worst relative "
+              "difference %.2g, %d with other colours than eval / pdf\n",
+      compared, worst, differing);
+  RecordProperty("lobe_weight_luminance_worst", std::to_string(worst));
+  EXPECT_EQ(failures, 0);
+  EXPECT_GT(compared, count * 9 / 10);
+  EXPECT_GT(differing, count / 10);
+}
+
+// Sums of samples and of their squares, per channel: the mean and its
+// standard error (from the samples' own variance).
+struct channel_stats {
+  glm::dvec3 sum = {0, 0, 0}, sum2 = {0, 0, 0};
+  int        n   = 0;
+};
+static void add_sample(channel_stats& stats, const vec3f& x) {
+  auto d = glm::dvec3(x);
+  stats.sum += d, stats.sum2 += d * d, stats.n++;
+}
+static double sample_mean(const channel_stats& stats, int c) { return stats.sum[c] / stats.n; }
+static double standard_error(const channel_stats& stats, int c) {
+  auto n        = (double)stats.n;
+  auto variance = std::max(0.0, (stats.sum2[c] - stats.sum[c] * stats.sum[c] / n) / (n - 1));
+  return std::sqrt(variance / n);
+}
+
+TEST(hair, lobe_weight_and_eval_over_pdf_estimate_the_same_albedo) {
+  // Each lobe's directions are drawn with density M_p N_p, so both A_p / P(p)
+  // and eval / pdf at the drawn direction estimate the directional albedo
+  // sum_p A_p (M_p and N_p integrate to one): five fixed hits (absorbing
+  // brown, blond, red, low roughness and a white fiber), 200k independent
+  // samples each, fixed seed. Per RGB channel, with SE the standard error of
+  // the mean estimated from the samples:
+  // - the paired difference of the two means (same directions) is within 4 SE
+  //   of the per-sample difference, plus 2e-4 relative (M_p's normalisation is
+  //   checked to 1e-4 by longitudinal_normalised, and N_p is float);
+  // - each mean is within 4 SE (+ 2e-4 relative) of sum_p A_p of the lobes;
+  // - the white fiber: every weight is 1 within 1e-4 (sum_p A_p = 1 and the
+  //   lobe is chosen by A_p itself), so the mean weight is 1 within 1e-4.
+  // The standard errors are printed: measured 1e-4 to 3e-3 relative for eval
+  // / pdf and at most 6e-4 relative for the paired difference, whose 4 SE is
+  // checked to stay below 1% relative (the check has power).
+  struct albedo_case {
+    const char* name;
+    vec3f       sigma_a;
+    float       beta_m, beta_n, alpha, h, theta_o;
+  };
+  auto cases = std::vector<albedo_case>{
+      {"brown", hair_sigma_a_from_melanin(1.3f, 0), 0.3f, 0.3f, 2, 0.3f, 0.4f},
+      {"blond", hair_sigma_a_from_melanin(0.3f, 0), 0.1f, 0.6f, 3, -0.8f, -1.0f},
+      {"red", hair_sigma_a_from_melanin(0.2f, 2), 0.6f, 0.9f, 8, 0.95f, 1.3f},
+      {"glossy", {0.4f, 1.0f, 2.5f}, 0.05f, 0.1f, 10, 0.0f, 0.9f},
+      {"white", {0, 0, 0}, 0.3f, 0.3f, 2, 0.5f, 0.2f},
+  };
+  auto rng = make_rng(31337);
+  for (auto& test : cases) {
+    auto white       = test.sigma_a == vec3f{0, 0, 0};
+    auto material    = white_material(test.beta_m, test.beta_n, test.alpha);
+    material.sigma_a = test.sigma_a;
+    auto frame       = frame_fromz({0, 0, 0}, normalize(vec3f{0.3f, -0.5f, 0.8f}));
+    auto wo          = transform_direction(frame, local_direction(test.theta_o, 0.7));
+    auto brdf        = eval_hair_brdf(make_hair_precomputed(material), test.h, frame, wo);
+    auto albedo      = vec3f{0, 0, 0};
+    for (auto p = 0; p < 4; p++) albedo += brdf.lobes.a[p];
+    auto weights = channel_stats{}, mixtures = channel_stats{}, differences = channel_stats{};
+    auto worst_white   = 0.0f;
+    const auto samples = 200000;
+    for (auto i = 0; i < samples; i++) {
+      auto sample   = sample_hair_scattering_weight(brdf, wo, rand2f(rng));
+      auto [f, pdf] = sample.incoming == vec3f{0, 0, 0}
+                          ? std::pair{vec3f{0, 0, 0}, 0.0f}
+                          : eval_hair_scattering_and_pdf(brdf, wo, sample.incoming);
+      auto mixture   = pdf > 0 ? f / pdf : vec3f{0, 0, 0};
+      add_sample(weights, sample.weight);
+      add_sample(mixtures, mixture);
+      add_sample(differences, sample.weight - mixture);
+      auto deviation = max_component(abs(sample.weight - vec3f{1, 1, 1}));
+      if (white) worst_white = std::max(worst_white, deviation);
+    }
+    for (auto c = 0; c < 3; c++) {
+      auto expected = (double)albedo[c], floor = 2e-4 * expected;
+      auto weight   = sample_mean(weights, c), weight_error = standard_error(weights, c);
+      auto mixture  = sample_mean(mixtures, c), mixture_error = standard_error(mixtures, c);
+      auto difference       = sample_mean(differences, c);
+      auto difference_error = standard_error(differences, c);
+      std::printf("[ figure ] albedo %s [%d]: sum A_p %.5f, weight %.5f +- %.1e, "
+                  "eval / pdf %.5f +- %.1e, difference %.1e +- %.1e\n",
+          test.name, c, expected, weight, weight_error, mixture, mixture_error, difference,
+          difference_error);
+      EXPECT_LE(std::abs(difference), 4 * difference_error + floor) << test.name << " " << c;
+      EXPECT_LE(4 * difference_error, 0.01 * expected) << test.name << " " << c;
+      EXPECT_NEAR(weight, expected, 4 * weight_error + floor) << test.name << " " << c;
+      EXPECT_NEAR(mixture, expected, 4 * mixture_error + floor) << test.name << " " << c;
+      if (white) EXPECT_NEAR(weight, 1, 1e-4) << "white furnace, channel " << c;
+    }
+    if (white) EXPECT_LE(worst_white, 1e-4f);
+    if (!white) EXPECT_LT(max_component(albedo), 0.95f) << test.name << " absorbs";
+  }
+}
+
+// -----------------------------------------------------------------------------
 // CHI-SQUARE GOODNESS OF FIT OF THE SAMPLER AGAINST THE PDF
 // -----------------------------------------------------------------------------
 
