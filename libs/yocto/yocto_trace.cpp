@@ -702,11 +702,13 @@ static void parallel_chunks(int64_t size, int64_t grain, int threads, Func&& fun
 float estimate_roulette_threshold(const scene_data& scene, const scene_bvh& bvh,
     const trace_context& context, const trace_params& params) {
   auto size   = camera_resolution(scene.cameras[params.camera], params.resolution);
-  // At most 1% of the render's samples (2 x 8 on 64 to 4,096 pixels).
+  // 1% of the render's samples (2 x 8 on up to 1/1600 of its pixel samples),
+  // but no fewer than 64 pixels (more than 1% of a tiny render) and no more
+  // than 4,096.
   auto pilot_samples = 8, pilot_pixels = (int)std::clamp(
       (double)size.x * size.y * params.samples / 1600, 64.0, 4096.0);
   auto pilot_threshold = 0.5f;
-  auto stride = std::max(1, (int)std::sqrt((double)size.x * size.y / pilot_pixels));
+  auto stride = std::max(1, (int)std::ceil(std::sqrt((double)size.x * size.y / pilot_pixels)));
   auto nx = std::max(size.x / stride, 1), ny = std::max(size.y / stride, 1);
   auto pilot  = params;
   pilot.split = 1;

@@ -153,6 +153,7 @@ double trace_image_bytes(const scene_data& scene, const trace_params& params);
 // pilot of a few samples on a grid of pixels (see the .cpp); trace_samples
 // calls it once per render when params.roulette_threshold is 0. The same for
 // the same scene, parameters and seed, whatever the threads and sample range.
+// Its CPU time is the render's; its rays are not counted in trace_state::rays.
 float estimate_roulette_threshold(const scene_data& scene, const scene_bvh& bvh,
     const trace_context& context, const trace_params& params);
 
@@ -172,7 +173,8 @@ texture_data get_image(const trace_state& state);
 texture_data get_image(int width, int height, const std::vector<fixed_sum3>& sums,
     int samples);
 
-// Radiance of one path from a camera ray (exposed for tests).
+// Radiance of one path from a camera ray (exposed for tests); an automatic
+// roulette threshold (0) is taken as 1 here, as no pilot runs.
 vec3f trace_radiance(const scene_data& scene, const scene_bvh& bvh,
     const trace_context& context, const ray3f& ray, sequence_state& sequence,
     const trace_params& params, int64_t& rays);
