@@ -546,15 +546,13 @@ static void scatter_path(const trace_walk& walk, trace_point point, ray3f ray, i
     if (!isfinite(weight)) break;
 
     // Russian roulette from params.roulette_bounce on, only on paths whose
-    // throughput fell below params.roulette_threshold: they survive with
-    // probability throughput / threshold and are weighted up when they do
-    // (unbiased). A path that carries all of its energy (a white fiber)
-    // would gain variance and nothing else.
-    auto survive = max_component(weight) / walk.roulette_threshold;
+    // throughput fell below the render's threshold (the parameter's or the
+    // pilot's): they survive with probability throughput / threshold and are
+    // weighted up when they do (unbiased). A path that carries all of its
+    // energy (a white fiber) would gain variance and nothing else.
+    auto survive = max_component(weight) / threshold;
     if (bounce >= params.roulette_bounce) {
-      if (walk.roulette_points)
-        walk.roulette_points->push_back(
-            {max_component(weight), std::min(survive, 1.0f), radiance, rays});
+      if (points) points->push_back({max_component(weight), std::min(survive, 1.0f), radiance, rays});
       if (survive < 1) {
         if (lobe_roulette.y >= survive) break;
         weight /= survive;
