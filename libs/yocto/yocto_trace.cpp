@@ -437,10 +437,14 @@ struct trace_roulette_point {
   int64_t rays    = 0;
 };
 
-// The lens pair, drawn only for cameras with a lens (a pinhole ignores it).
-static vec2f lens_numbers(const camera_data& camera, sequence_state& sequence) {
-  if (camera.orthographic || camera.aperture <= 0) return {0, 0};
-  return sample_sequence2f(sequence, trace_pair_lens);
+// The camera ray of a sample of pixel (i, j) of a width x height image; the
+// lens pair is drawn only for cameras with a lens (a pinhole ignores it).
+static ray3f sample_camera_ray(const camera_data& camera, int i, int j, int width,
+    int height, sequence_state& sequence) {
+  auto puv  = sample_sequence2f(sequence, trace_pair_pixel);
+  auto lens = !camera.orthographic && camera.aperture > 0;
+  auto luv  = lens ? sample_sequence2f(sequence, trace_pair_lens) : vec2f{0, 0};
+  return eval_camera(camera, {(i + puv.x) / width, (j + puv.y) / height}, luv);
 }
 
 // What every vertex of a path needs: the scene, its BVH and lights, the
@@ -474,14 +478,14 @@ static void scatter_path(const trace_walk& walk, trace_point point, ray3f ray, i
     vec3f weight, sequence_state& sequence, vec3f& radiance) {
   auto& [scene, bvh, context, params, threshold, rays, record, points] = walk;
   auto use_mis = params.sampler == trace_sampler_type::path;
-  // MIS weighs BSDF samples that find a light that light sampling finds too:
-  // without such lights no BSDF pdf is needed.
-  auto needs_pdf = use_mis && !context.lights.empty();
+  // Next-event estimation, when there are lights to sample; MIS weighs the
+  // BSDF samples that find them, so only then is a BSDF pdf needed.
+  auto samples_lights = use_mis && !context.lights.empty();
   for (;; bounce++) {
     auto outgoing = -ray.d;
     // Next-event estimation: one light, one shadow ray.
     auto pairs = trace_bounce_pairs(bounce);
-    if (use_mis && !context.lights.empty()) {
+    if (samples_lights) {
       auto  nlights = (int)context.lights.size();
       auto  choice  = sample_sequence2f(sequence, pairs + trace_pair_light);
       auto& light   = context.lights[std::min((int)(choice.x * nlights), nlights - 1)];
@@ -527,7 +531,7 @@ static void scatter_path(const trace_walk& walk, trace_point point, ray3f ray, i
                     : vec2f{0, 0};
     auto incoming = vec3f{0, 0, 0};
     auto bsdf_pdf = 0.0f;  // 0 when no MIS weight will need it
-    if (point.type == material_type::hair && !needs_pdf && !params.hair_four_numbers &&
+    if (point.type == material_type::hair && !samples_lights && !params.hair_four_numbers &&
         !params.hair_mixture_weight) {
       // No pdf needed: the sampled lobe's own weight, no evaluation.
       auto sample = sample_hair_scattering_weight(point.hair, outgoing, rn);
@@ -717,6 +721,8 @@ float estimate_roulette_threshold(const scene_data& scene, const scene_bvh& bvh,
   auto rows = std::vector<std::array<double, 7>>(ny);
   parallel_chunks(ny, 1, params.threads, [&](int64_t begin, int64_t end) {
     auto points = std::vector<trace_roulette_point>{};
+    auto rays   = (int64_t)0;
+    auto walk   = trace_walk{scene, bvh, context, pilot, pilot_threshold, rays, nullptr, &points};
     for (auto row = begin; row < end; row++) {
       auto& sums = rows[row];
       sums       = {};
@@ -732,14 +738,10 @@ float estimate_roulette_threshold(const scene_data& scene, const scene_bvh& bvh,
           auto seed = hash_uint64(params.seed ^ (0x70696c6f74ULL + (uint64_t)set));  // "pilot"
           auto sum  = glm::dvec3{0, 0, 0};
           for (auto s = 0; s < pilot_samples; s++) {
-            auto rays     = (int64_t)0;
-            auto walk     = trace_walk{scene, bvh, context, pilot, pilot_threshold, rays,
-                nullptr, &points};
+            rays          = 0;
             auto sequence = make_sequence(pilot.sequence, seed, pixel, (uint32_t)s,
                 trace_bounce_pairs(pilot.sobol_bounces));
-            auto puv = sample_sequence2f(sequence, trace_pair_pixel);
-            auto luv = lens_numbers(camera, sequence);
-            auto ray = eval_camera(camera, {(i + puv.x) / size.x, (j + puv.y) / size.y}, luv);
+            auto ray = sample_camera_ray(camera, i, j, size.x, size.y, sequence);
             if (!is_traceable_ray(ray)) continue;
             points.clear();
             auto radiance = trace_path(walk, ray, sequence);
@@ -799,10 +801,7 @@ static void trace_rows(trace_state& state, const scene_data& scene, const scene_
       for (auto s = next; s < next + count; s++) {
         auto sequence = make_sequence(params.sequence, params.seed, pixel, (uint32_t)s,
             trace_bounce_pairs(params.sobol_bounces));
-        auto puv      = sample_sequence2f(sequence, trace_pair_pixel);
-        auto luv      = lens_numbers(camera, sequence);
-        auto uv       = vec2f{(i + puv.x) / state.width, (j + puv.y) / state.height};
-        auto ray      = eval_camera(camera, uv, luv);
+        auto ray = sample_camera_ray(camera, i, j, state.width, state.height, sequence);
         // validate_scene checked the camera; a ray that round-off still
         // made untraceable counts as a dropped sample.
         if (!is_traceable_ray(ray)) {

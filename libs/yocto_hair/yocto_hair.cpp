@@ -460,12 +460,6 @@ float sample_hair_scattering_pdf(
   return eval_hair_scattering_and_pdf(brdf, outgoing, incoming).second;
 }
 
-vec3f sample_hair_scattering(
-    const hair_brdf& brdf, const vec3f& outgoing, const vec2f& rn) {
-  auto u0 = demux_hair_sample_filled(rn.x), u1 = demux_hair_sample_filled(rn.y);
-  return sample_hair_scattering(brdf, outgoing, vec4f{u0.x, u0.y, u1.x, u1.y});
-}
-
 // The lobe chosen by u: p with probability a_pdf[p]; -1 if the fiber
 // returns nothing.
 static int sample_hair_lobe(const hair_lobes& lobes, float u) {
@@ -518,27 +512,38 @@ static vec3f sample_hair_lobe_direction(const hair_brdf& brdf, const hair_lobes&
          brdf.z * (cos_theta_i * sin_phi_i);
 }
 
-vec3f sample_hair_scattering(
+// A lobe chosen by rn.x, a direction of it from the other three numbers, and
+// the lobe's weight A_p / P(p); zero direction and weight if the fiber
+// returns nothing.
+static hair_sample sample_hair_lobes(
     const hair_brdf& brdf, const vec3f& outgoing, const vec4f& rn) {
   auto  wo      = make_angles(brdf, outgoing);
   auto  storage = hair_lobes{};
   auto& lobes   = find_lobes(brdf, outgoing, wo, storage);
   auto  p       = sample_hair_lobe(lobes, rn.x);
-  if (p < 0) return {0, 0, 0};
-  return sample_hair_lobe_direction(brdf, lobes, wo, p, rn);
+  if (p < 0) return {};
+  return {sample_hair_lobe_direction(brdf, lobes, wo, p, rn), lobes.a[p] / lobes.a_pdf[p]};
+}
+
+// Two numbers demuxed into the four a direction takes.
+static vec4f demux_hair_numbers(const vec2f& rn) {
+  auto u0 = demux_hair_sample_filled(rn.x), u1 = demux_hair_sample_filled(rn.y);
+  return {u0.x, u0.y, u1.x, u1.y};
+}
+
+vec3f sample_hair_scattering(
+    const hair_brdf& brdf, const vec3f& outgoing, const vec2f& rn) {
+  return sample_hair_lobes(brdf, outgoing, demux_hair_numbers(rn)).incoming;
+}
+
+vec3f sample_hair_scattering(
+    const hair_brdf& brdf, const vec3f& outgoing, const vec4f& rn) {
+  return sample_hair_lobes(brdf, outgoing, rn).incoming;
 }
 
 hair_sample sample_hair_scattering_weight(
     const hair_brdf& brdf, const vec3f& outgoing, const vec2f& rn) {
-  auto u0 = demux_hair_sample_filled(rn.x), u1 = demux_hair_sample_filled(rn.y);
-  auto  numbers = vec4f{u0.x, u0.y, u1.x, u1.y};
-  auto  wo      = make_angles(brdf, outgoing);
-  auto  storage = hair_lobes{};
-  auto& lobes   = find_lobes(brdf, outgoing, wo, storage);
-  auto  p       = sample_hair_lobe(lobes, numbers.x);
-  if (p < 0) return {};
-  return {sample_hair_lobe_direction(brdf, lobes, wo, p, numbers),
-      lobes.a[p] / lobes.a_pdf[p]};
+  return sample_hair_lobes(brdf, outgoing, demux_hair_numbers(rn));
 }
 
 }  // namespace yocto
