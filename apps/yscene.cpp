@@ -231,6 +231,10 @@ static bool check_render_output(
     return false;
   }
   auto pixel_bytes = options.sample_range.empty() ? 12 : render_part_pixel_bytes;
+  // AOVs: 23 float channels, or their sums in a part.
+  if (params.aovs)
+    pixel_bytes += options.sample_range.empty() ? 23 * 4
+                                                : trace_aov_sums * render_part_extra_bytes;
   return check_output_file(options.output, side * side * pixel_bytes + 65536, error);
 }
 
@@ -313,6 +317,8 @@ static std::string render_settings(const scene_data& scene, const trace_params& 
   line("split", std::to_string(params.split));
   line("shadow_threshold", number(params.shadow_threshold));
   line("clamp", number(params.clamp));
+  // Only when on, so that the settings of renders without AOVs stay as they were.
+  if (params.aovs) line("aovs", "1");
   line("hair", std::string(params.hair_four_numbers ? "four-numbers" : "demux") +
                    (params.hair_per_hit ? " per-hit" : "") +
                    (params.hair_mixture_weight ? " mixture-weight" : "") +
@@ -362,6 +368,11 @@ static int run_render(const render_options& options, trace_params params,
         "do not apply");
   if (!is_image_filename(options.output))
     return print_error(options.output + ": unknown image extension (use exr, hdr, pfm, png or jpg)");
+  if (params.aovs && path_extension(options.output) != ".exr")
+    return print_error(options.output + ": --aovs writes the AOVs as layers of an OpenEXR "
+                                        "image: use a name ending in .exr");
+  if (params.aovs && options.embree_only)
+    return print_error("--embree-only casts rays alone: --aovs does not apply");
   // Ctrl-C from here on ends the render after its current pass (after the
   // first, if it comes while loading) and saves the samples done.
   interrupted   = false;
@@ -495,19 +506,25 @@ static int run_render(const render_options& options, trace_params params,
     part.rays      = state.rays;
     part.nonfinite = state.nonfinite;
     part.sums      = std::move(state.sums);
+    part.extra     = params.aovs ? trace_aov_sums : 0;
+    part.extra_sums = std::move(state.aov_sums);
   }
-  auto image = is_part ? texture_data{} : get_image(state);
-  auto save  = [&](const std::string& filename, std::string& error, bool replace) {
-    return is_part ? save_render_part(filename, part, error, replace)
-                   : save_image(filename, image, error, options.exposure, replace);
+  auto image  = is_part ? texture_data{} : get_image(state);
+  auto layers = is_part || !params.aovs
+                    ? std::vector<image_layer>{}
+                    : get_aov_layers(state.width, state.height, state.aov_sums, state.samples);
+  auto save   = [&](const std::string& filename, std::string& error, bool replace) {
+    if (is_part) return save_render_part(filename, part, error, replace);
+    if (params.aovs) return save_image_layers(filename, image, layers, error, replace);
+    return save_image(filename, image, error, options.exposure, replace);
   };
   if (!save(options.output, error, true)) {
     // The output was checked before the render, yet the write failed (the
     // disk filled up, say): the samples are worth keeping.
     auto rescued     = std::string{};
     auto save_rescue = [&](const std::string& filename, std::string& error) {
-      return is_part ? save(filename, error, false)
-                     : save_image(filename, image, error, 0, false);
+      return is_part || params.aovs ? save(filename, error, false)
+                                    : save_image(filename, image, error, 0, false);
     };
     if (save_rescued_render(options.output, save_rescue, rescued))
       return print_error(error + "; the render was saved to " + rescued);
@@ -606,7 +623,8 @@ static int run_merge(const merge_options& options) {
     if (!load_render_part(filename, part, error)) return print_error(error);
     if (ranges.empty()) {
       // Fail before the work if the output cannot be written.
-      auto pixel_bytes = options.part ? render_part_pixel_bytes : 12;
+      auto pixel_bytes = options.part ? render_part_pixel_bytes + part.extra * render_part_extra_bytes
+                                      : 12 + (part.extra > 0 ? 23 * 4 : 0);
       auto bytes       = (double)part.width * part.height * pixel_bytes + 65536;
       if (!check_output_file(output, bytes, error)) return print_error(error);
       merged.settings = part.settings;
@@ -614,6 +632,8 @@ static int run_merge(const merge_options& options) {
       merged.width    = part.width;
       merged.height   = part.height;
       merged.sums.assign(part.sums.size(), fixed_sum3{});
+      merged.extra = part.extra;
+      merged.extra_sums.assign(part.extra_sums.size(), fixed_sum3{});
     }
     auto& reference = ranges.empty() ? filename : ranges.front().filename;
     if (part.samples != merged.samples)
@@ -637,7 +657,15 @@ static int run_merge(const merge_options& options) {
       return print_error(filename + ": " + std::to_string(part.width) + "x" +
                          std::to_string(part.height) + " pixels, but " + reference + " has " +
                          std::to_string(merged.width) + "x" + std::to_string(merged.height));
+    // The settings say whether a render has AOVs; a part that lacks them
+    // where its settings say it has them is damaged or not ours.
+    if (part.extra != merged.extra || part.extra_sums.size() != merged.extra_sums.size())
+      return print_error(filename + ": " + std::to_string(part.extra) +
+                         " extra sums a pixel, but " + reference + " has " +
+                         std::to_string(merged.extra));
     for (size_t i = 0; i < part.sums.size(); i++) add_fixed(merged.sums[i], part.sums[i]);
+    for (size_t i = 0; i < part.extra_sums.size(); i++)
+      add_fixed(merged.extra_sums[i], part.extra_sums[i]);
     merged.rays += part.rays;
     merged.nonfinite += part.nonfinite;
     ranges.push_back({filename, part.first, part.first + part.count});
@@ -670,11 +698,24 @@ static int run_merge(const merge_options& options) {
   merged.first = first;
   merged.count = end - first;
   if (!make_output_directory(output, error)) return print_error(error);
+  auto aovs = merged.extra == trace_aov_sums;
+  if (merged.extra > 0 && !aovs)
+    return print_error(ranges.front().filename + ": " + std::to_string(merged.extra) +
+                       " extra sums a pixel, not the " + std::to_string(trace_aov_sums) +
+                       " of the AOVs of this yscene");
+  if (aovs && !options.part && path_extension(output) != ".exr")
+    std::fprintf(stderr, "warning: %s keeps the beauty alone: the parts' AOVs are saved as "
+                         "layers of an .exr output\n", output.c_str());
+  auto image = options.part ? texture_data{}
+                            : get_image(merged.width, merged.height, merged.sums,
+                                  merged.samples);
   auto saved = options.part ? save_render_part(output, merged, error)
-                            : save_image(output,
-                                  get_image(merged.width, merged.height, merged.sums,
-                                      merged.samples),
-                                  error, options.exposure);
+               : aovs && path_extension(output) == ".exr"
+                   ? save_image_layers(output, image,
+                         get_aov_layers(merged.width, merged.height, merged.extra_sums,
+                             merged.samples),
+                         error)
+                   : save_image(output, image, error, options.exposure);
   if (!saved) return print_error(error);
   if (merged.nonfinite > 0)
     std::fprintf(stderr, "warning: %lld NaN or Inf samples were dropped\n",
@@ -1160,6 +1201,8 @@ static int run_main(int argc, const char** argv) {
   render->add_flag("--bvh-compact", render_opts.bvh_compact,
       "Embree's compact BVH layout (less memory, slower)");
   render->add_flag("--stats", render_opts.stats, "print a machine-readable line of figures");
+  render->add_flag("--aovs", params.aovs,
+      "also write albedo, normal, tangent, depth, coverage and hair lobe layers (exr)");
   render->add_option("--sample-range", render_opts.sample_range,
       "A:B: render only samples A ... B-1 of the --samples render and write them as a part "
       "(.exr) for yscene merge");

@@ -2,15 +2,29 @@
 # Installs the Debian 12 packages yocto-hair needs, only those missing, then
 # configures and builds (Release) into build/. python3-distributed is Dask,
 # for scripts/farm.py and its test. With --fuzz, also clang-14
-# and libFuzzer, which scripts/fuzz.sh needs.
+# and libFuzzer, which scripts/fuzz.sh needs. With --denoise, also Debian's
+# OpenImageIO and NumPy for Python and a venv, .venv/denoise, that sees them
+# and holds pyoidn (Intel Open Image Denoise from PyPI) for scripts/denoise.py.
 set -euo pipefail
 cd "$(dirname "$0")/.."
+fuzz=0
+denoise=0
+for option in "$@"; do
+  case $option in
+    --fuzz) fuzz=1 ;;
+    --denoise) denoise=1 ;;
+    *) echo "usage: bash scripts/setup.sh [--fuzz] [--denoise]" >&2; exit 2 ;;
+  esac
+done
 
 packages="cmake ninja-build g++ pkg-config libembree-dev libopenimageio-dev
   openimageio-tools libglm-dev nlohmann-json3-dev libtbb-dev libcli11-dev libgtest-dev
   libbenchmark-dev zlib1g-dev python3-distributed"
-if [ "${1:-}" = --fuzz ]; then
+if [ $fuzz -eq 1 ]; then
   packages="$packages clang-14 libclang-rt-14-dev libfuzzer-14-dev"
+fi
+if [ $denoise -eq 1 ]; then
+  packages="$packages python3-venv python3-numpy python3-openimageio"
 fi
 missing=""
 for package in $packages; do
@@ -31,6 +45,19 @@ if [ -n "$missing" ]; then
   fi
   $sudo apt-get update -qq
   $sudo env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq $missing
+fi
+
+# Debian's python3 (the one the packages above are for, whatever python3 comes
+# first on PATH); pip only when the venv lacks this exact pyoidn.
+if [ $denoise -eq 1 ]; then
+  venv=.venv/denoise
+  pyoidn=2.5.1.0
+  check="import importlib.metadata as m, sys, pyoidn; sys.exit(m.version('pyoidn') != '$pyoidn')"
+  if ! "$venv/bin/python" -c "$check" 2>/dev/null; then
+    echo "installing: pyoidn $pyoidn into $venv"
+    /usr/bin/python3 -m venv --system-site-packages "$venv"
+    "$venv/bin/python" -m pip install --quiet --disable-pip-version-check "pyoidn==$pyoidn"
+  fi
 fi
 
 cmake -S . -B build -G Ninja -DCMAKE_BUILD_TYPE=Release >/dev/null

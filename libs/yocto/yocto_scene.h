@@ -45,6 +45,14 @@ struct texture_data {
   std::vector<vec3f> pixels = {};
 };
 
+// Named float channels of an image, interleaved (pixel by pixel), beside a
+// texture_data's RGB: an EXR layer such as "albedo" with channels R, G, B.
+struct image_layer {
+  std::string              name     = "";
+  std::vector<std::string> channels = {};
+  std::vector<float>       pixels   = {};  // width * height * channels.size()
+};
+
 enum struct material_type { matte, glossy, hair };
 inline const auto material_type_names = std::array<std::string, 3>{
     "matte", "glossy", "hair"};

@@ -1347,6 +1347,53 @@ bool save_image(const std::string& filename, const texture_data& image,
   return save_binary(filename, data, error, replace);
 }
 
+bool save_image_layers(const std::string& filename, const texture_data& image,
+    const std::vector<image_layer>& layers, std::string& error, bool replace) {
+  if (path_extension(filename) != ".exr") {
+    error = filename + ": image layers are saved in OpenEXR only: use a name ending in .exr";
+    return false;
+  }
+  // The RGB part's checks (size, finite pixels) are encode_image's.
+  auto data = std::string{};
+  if (!encode_image(filename, image, data, error, 0)) return false;
+  auto pixels   = image.pixels.size();
+  auto channels = 3;
+  auto spec     = OIIO::ImageSpec(image.width, image.height, 3, OIIO::TypeDesc::FLOAT);
+  for (auto& layer : layers) {
+    if (layer.channels.empty() || layer.pixels.size() != pixels * layer.channels.size()) {
+      error = filename + ": cannot save layer " + layer.name + ": " +
+              std::to_string(layer.pixels.size()) + " values for " +
+              std::to_string(pixels) + " pixels of " +
+              std::to_string(layer.channels.size()) + " channels";
+      return false;
+    }
+    for (size_t i = 0; i < layer.pixels.size(); i++) {
+      if (!std::isfinite(layer.pixels[i])) {
+        auto pixel = i / layer.channels.size();
+        error = filename + ": cannot save layer " + layer.name + ": pixel (" +
+                std::to_string(pixel % image.width) + ", " +
+                std::to_string(pixel / image.width) + ") is not finite";
+        return false;
+      }
+    }
+    for (auto& channel : layer.channels) spec.channelnames.push_back(layer.name + "." + channel);
+    channels += (int)layer.channels.size();
+  }
+  spec.nchannels = channels;
+  spec.attribute("compression", "zip");
+  auto values = std::vector<float>(pixels * channels);
+  for (size_t i = 0; i < pixels; i++) {
+    auto out = &values[i * channels];
+    for (auto c = 0; c < 3; c++) *out++ = image.pixels[i][c];
+    for (auto& layer : layers) {
+      auto count = layer.channels.size();
+      for (size_t c = 0; c < count; c++) *out++ = layer.pixels[i * count + c];
+    }
+  }
+  if (!encode_with_oiio(filename, "image", spec, values.data(), data, error)) return false;
+  return save_binary(filename, data, error, replace);
+}
+
 }  // namespace yocto
 
 // -----------------------------------------------------------------------------
@@ -1358,8 +1405,10 @@ static const auto render_part_format = std::string{"yocto-hair render part 1"};
 static const auto render_part_channels = std::array<std::string, 3>{"R", "G", "B"};
 
 // The name of the channel with bits 32 half ... 32 half + 31 of channel c.
-static std::string render_part_channel(int c, int half) {
-  return "sum." + render_part_channels[c] + "." + std::to_string(half);
+// Extra sum k: "extra.K." before the same names.
+static std::string render_part_channel(int c, int half, int extra = -1) {
+  auto prefix = extra < 0 ? std::string{"sum."} : "extra." + std::to_string(extra) + ".";
+  return prefix + render_part_channels[c] + "." + std::to_string(half);
 }
 
 static std::string render_part_range(const render_part& part) {
@@ -1374,6 +1423,11 @@ static uint64_t render_part_checksum(const render_part& part) {
            (int64_t)part.width, (int64_t)part.height, part.rays, part.nonfinite})
     hash_word(stream, (uint64_t)value);
   hash_bytes(stream, part.sums.data(), part.sums.size() * sizeof(fixed_sum3));
+  // Parts without extra sums keep the checksums they always had.
+  if (part.extra > 0) {
+    hash_word(stream, (uint64_t)part.extra);
+    hash_bytes(stream, part.extra_sums.data(), part.extra_sums.size() * sizeof(fixed_sum3));
+  }
   return stream.hash;
 }
 
@@ -1394,15 +1448,23 @@ bool save_render_part(const std::string& filename, const render_part& part,
     error = filename + ": cannot save a render part without samples or pixels";
     return false;
   }
-  // R, G, B as floats, then the words as 32-bit halves.
-  auto channels = 3 + 18;
+  if (part.extra < 0 || part.extra_sums.size() != part.sums.size() * part.extra) {
+    error = filename + ": cannot save a render part whose extra sums do not fit its pixels";
+    return false;
+  }
+  // R, G, B as floats, then the words as 32-bit halves: the sums', then each
+  // extra sum's.
+  auto sums     = 1 + part.extra;
+  auto channels = 3 + 18 * sums;
   auto spec     = OIIO::ImageSpec(part.width, part.height, channels, OIIO::TypeDesc::FLOAT);
   spec.channelnames.assign(render_part_channels.begin(), render_part_channels.end());
   spec.channelformats.assign(3, OIIO::TypeDesc::FLOAT);
-  for (auto c = 0; c < 3; c++) {
-    for (auto half = 0; half < 6; half++) {
-      spec.channelnames.push_back(render_part_channel(c, half));
-      spec.channelformats.push_back(OIIO::TypeDesc::UINT32);
+  for (auto k = -1; k < part.extra; k++) {
+    for (auto c = 0; c < 3; c++) {
+      for (auto half = 0; half < 6; half++) {
+        spec.channelnames.push_back(render_part_channel(c, half, k));
+        spec.channelformats.push_back(OIIO::TypeDesc::UINT32);
+      }
     }
   }
   spec.attribute("compression", "zip");
@@ -1412,22 +1474,22 @@ bool save_render_part(const std::string& filename, const render_part& part,
   spec.attribute("yocto:range", render_part_range(part));
   spec.attribute("yocto:rays", std::to_string(part.rays));
   spec.attribute("yocto:nonfinite", std::to_string(part.nonfinite));
+  if (part.extra > 0) spec.attribute("yocto:extra", std::to_string(part.extra));
   spec.attribute("yocto:checksum", hex_string(render_part_checksum(part)));
-  // Pixels in the native layout: 3 floats, then 18 unsigned ints.
-  struct part_pixel {
-    float    mean[3];
-    uint32_t halves[18];
-  };
-  static_assert(sizeof(part_pixel) == render_part_pixel_bytes);
-  auto pixels = std::vector<part_pixel>(part.sums.size());
+  // Pixels in the native layout: 3 floats, then 18 unsigned ints a sum.
+  auto pixel_words = (size_t)channels;
+  static_assert(render_part_pixel_bytes == 4 * (3 + 18) && render_part_extra_bytes == 4 * 18);
+  auto pixels = std::vector<uint32_t>(part.sums.size() * pixel_words);
   for (size_t i = 0; i < part.sums.size(); i++) {
-    auto mean = fixed_to_double(part.sums[i]) / (double)part.count;
-    for (auto c = 0; c < 3; c++) {
-      pixels[i].mean[c] = (float)mean[c];
-      for (auto word = 0; word < 3; word++) {
-        auto value = part.sums[i].words[3 * c + word];
-        pixels[i].halves[6 * c + 2 * word]     = (uint32_t)value;
-        pixels[i].halves[6 * c + 2 * word + 1] = (uint32_t)(value >> 32);
+    auto out  = &pixels[i * pixel_words];
+    auto mean = glm::vec3(fixed_to_double(part.sums[i]) / (double)part.count);
+    std::memcpy(out, &mean[0], 3 * sizeof(float));
+    out += 3;
+    for (auto k = -1; k < part.extra; k++) {
+      auto& sum = k < 0 ? part.sums[i] : part.extra_sums[i * part.extra + k];
+      for (auto word = 0; word < 9; word++) {
+        *out++ = (uint32_t)sum.words[word];
+        *out++ = (uint32_t)(sum.words[word] >> 32);
       }
     }
   }
@@ -1485,16 +1547,24 @@ bool load_render_part(const std::string& filename, render_part& part, std::strin
   auto offsets = std::vector<size_t>(spec.nchannels);
   for (auto c = 1; c < spec.nchannels; c++)
     offsets[c] = offsets[c - 1] + spec.channelformat(c - 1).size();
-  auto sum_offsets = std::array<size_t, 18>{};
-  for (auto c = 0; c < 3; c++) {
-    for (auto half = 0; half < 6; half++) {
-      auto name  = render_part_channel(c, half);
-      auto found = std::find(spec.channelnames.begin(), spec.channelnames.end(), name);
-      if (found == spec.channelnames.end()) return not_part("no channel " + name);
-      auto index = (int)(found - spec.channelnames.begin());
-      if (spec.channelformat(index) != OIIO::TypeDesc::UINT32)
-        return not_part("channel " + name + " is not 32-bit unsigned");
-      sum_offsets[6 * c + half] = offsets[index];
+  auto extra = (int64_t)0;
+  if (spec.find_attribute("yocto:extra") &&
+      (!parse_part_number(spec.get_string_attribute("yocto:extra"), extra) || extra < 1 ||
+          extra > 64))
+    return not_part("bad yocto:extra");
+  part.extra       = (int)extra;
+  auto sum_offsets = std::vector<size_t>(18 * (1 + part.extra));
+  for (auto k = -1; k < part.extra; k++) {
+    for (auto c = 0; c < 3; c++) {
+      for (auto half = 0; half < 6; half++) {
+        auto name  = render_part_channel(c, half, k);
+        auto found = std::find(spec.channelnames.begin(), spec.channelnames.end(), name);
+        if (found == spec.channelnames.end()) return not_part("no channel " + name);
+        auto index = (int)(found - spec.channelnames.begin());
+        if (spec.channelformat(index) != OIIO::TypeDesc::UINT32)
+          return not_part("channel " + name + " is not 32-bit unsigned");
+        sum_offsets[18 * (k + 1) + 6 * c + half] = offsets[index];
+      }
     }
   }
   if (spec.width <= 0 || spec.height <= 0 || spec.depth > 1) return not_part("no pixels");
@@ -1502,7 +1572,7 @@ bool load_render_part(const std::string& filename, render_part& part, std::strin
   auto pixel_bytes = spec.pixel_bytes(true);
   if (!check_load_memory(filename,
           "a " + std::to_string(spec.width) + "x" + std::to_string(spec.height) + " render part",
-          pixels * ((double)pixel_bytes + sizeof(fixed_sum3)), error))
+          pixels * ((double)pixel_bytes + (1 + part.extra) * sizeof(fixed_sum3)), error))
     return false;
   auto buffer = std::vector<unsigned char>((size_t)pixels * pixel_bytes);
   if (!input->read_image(0, 0, 0, spec.nchannels, OIIO::TypeDesc::UNKNOWN, buffer.data())) {
@@ -1511,13 +1581,18 @@ bool load_render_part(const std::string& filename, render_part& part, std::strin
   }
   input->close();
   part.sums.resize((size_t)pixels);
+  part.extra_sums.resize((size_t)pixels * part.extra);
   for (size_t i = 0; i < part.sums.size(); i++) {
     auto pixel = buffer.data() + i * pixel_bytes;
-    for (auto k = 0; k < 9; k++) {
-      uint32_t low, high;
-      std::memcpy(&low, pixel + sum_offsets[2 * k], 4);
-      std::memcpy(&high, pixel + sum_offsets[2 * k + 1], 4);
-      part.sums[i].words[k] = (uint64_t)high << 32 | low;
+    for (auto k = -1; k < part.extra; k++) {
+      auto& sum     = k < 0 ? part.sums[i] : part.extra_sums[i * part.extra + k];
+      auto  offsets = &sum_offsets[18 * (k + 1)];
+      for (auto word = 0; word < 9; word++) {
+        uint32_t low, high;
+        std::memcpy(&low, pixel + offsets[2 * word], 4);
+        std::memcpy(&high, pixel + offsets[2 * word + 1], 4);
+        sum.words[word] = (uint64_t)high << 32 | low;
+      }
     }
   }
   if (spec.get_string_attribute("yocto:checksum") != hex_string(render_part_checksum(part))) {

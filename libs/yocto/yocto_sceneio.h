@@ -99,6 +99,13 @@ bool load_image(const std::string& filename, texture_data& image, std::string& e
 bool save_image(const std::string& filename, const texture_data& image,
     std::string& error, float exposure = 0, bool replace = true);
 
+// Saves an OpenEXR image (the name must end in .exr) of the RGB pixels as
+// channels R, G, B and every layer's channels as LAYER.CHANNEL (float32,
+// zip), written as any output (complete or absent). Layers must have the
+// image's size and finite values.
+bool save_image_layers(const std::string& filename, const texture_data& image,
+    const std::vector<image_layer>& layers, std::string& error, bool replace = true);
+
 // Is this an image extension we can save?
 bool is_image_filename(const std::string& filename);
 
@@ -125,16 +132,23 @@ struct render_part {
   int64_t                 rays      = 0;  // rays cast for these samples
   int64_t                 nonfinite = 0;  // samples dropped as NaN or Inf
   std::vector<fixed_sum3> sums      = {};
+  // Further exact sums, the same number a pixel (the AOVs of yocto_trace),
+  // or none.
+  int                     extra     = 0;  // sums a pixel
+  std::vector<fixed_sum3> extra_sums = {};
 };
 
 // A part's bytes a pixel before compression: R, G, B as floats, then the
-// sums as 18 32-bit words.
+// sums as 18 32-bit words (and 18 more for each extra sum).
 inline constexpr int render_part_pixel_bytes = 84;
+inline constexpr int render_part_extra_bytes = 72;
 
 // Saves a part as an OpenEXR image (the name must end in .exr), written as
 // any output (complete or absent). Channels R, G, B hold the mean of the
 // part's samples, to look at; the 18 32-bit unsigned channels sum.R.0 ...
-// sum.B.5 hold the sums' words in 32-bit halves, least significant first.
+// sum.B.5 hold the sums' words in 32-bit halves, least significant first;
+// extra sums k in channels extra.K.R.0 ... extra.K.B.5 the same way, with
+// the attribute yocto:extra (their number a pixel; absent for none).
 // String attributes: yocto:part (the format, "yocto-hair render part 1"),
 // yocto:settings, yocto:samples, yocto:range ("first:end", end excluded),
 // yocto:rays, yocto:nonfinite and yocto:checksum (16 hex digits: a

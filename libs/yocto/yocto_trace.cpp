@@ -114,6 +114,16 @@ static bool may_scatter(const trace_point& point, const vec3f& outgoing, const v
          (dot(point.normal, incoming) > 0 && dot(point.normal, outgoing) > 0);
 }
 
+// Directional albedo for the AOV: hair the model's own (sum of A_p), matte
+// its colour, glossy the Lambertian base under the coat plus the coat's
+// Fresnel reflectance at the outgoing angle (GGX's own losses left out).
+static vec3f eval_albedo(const trace_point& point, const vec3f& outgoing) {
+  if (point.type == material_type::hair) return eval_hair_albedo(point.hair, outgoing);
+  if (point.type == material_type::matte) return point.color;
+  auto fresnel = fresnel_dielectric(point.ior, dot(point.normal, outgoing));
+  return point.color * (1 - fresnel) + vec3f{fresnel, fresnel, fresnel};
+}
+
 // `more` is used by hair with params.hair_four_numbers only (empty otherwise).
 static vec3f sample_bsdfcos(const trace_point& point, const vec3f& outgoing, float rnl,
     const vec2f& rn, const vec2f& more, const trace_params& params) {
@@ -474,15 +484,26 @@ static scene_intersection cast_closest(const trace_walk& walk, const ray3f& ray)
 // most params.bounces times (pbrt's maxdepth): the ray leaving the last
 // scattering vertex is still traced for the emission it finds, so that its
 // MIS weight and the light sample's add up to one.
+//
+// With `lobes` (four values, R to TRRT), the radiance of the path from its
+// first hair scattering on is also added to the lobe it took there (the
+// light sampled there by each lobe's term, the rest by the sampled lobe or
+// by the lobes' shares of the sampled direction's value): see AOVS.
 static void scatter_path(const trace_walk& walk, trace_point point, ray3f ray, int bounce,
-    vec3f weight, sequence_state& sequence, vec3f& radiance) {
+    vec3f weight, sequence_state& sequence, vec3f& radiance, vec3f* lobes = nullptr) {
   auto& [scene, bvh, context, params, threshold, rays, record, points] = walk;
   auto use_mis = params.sampler == trace_sampler_type::path;
   // Next-event estimation, when there are lights to sample; MIS weighs the
   // BSDF samples that find them, so only then is a BSDF pdf needed.
   auto samples_lights = use_mis && !context.lights.empty();
+  // The lobe split: at the first hair vertex, each lobe's share of what the
+  // rest of the path brings (radiance beyond `lobe_mark`).
+  auto split_lobes  = false;
+  auto lobe_shares  = std::array<vec3f, 4>{};
+  auto lobe_mark    = vec3f{0, 0, 0};
   for (;; bounce++) {
     auto outgoing = -ray.d;
+    auto first_hair = lobes && !split_lobes && point.type == material_type::hair;
     // Next-event estimation: one light, one shadow ray.
     auto pairs = trace_bounce_pairs(bounce);
     if (samples_lights) {
@@ -517,7 +538,14 @@ static void scatter_path(const trace_walk& walk, trace_point point, ray3f ray, i
               shadow.tmax = length(sample.position - shadow.o) * (1 - 1e-3f);
             if (record) record->push_back({shadow, true});
             rays++;
-            if (!intersect_scene_bvh_any(bvh, shadow)) radiance += contribution / survive;
+            if (!intersect_scene_bvh_any(bvh, shadow)) {
+              radiance += contribution / survive;
+              if (first_hair) {
+                auto terms = eval_hair_scattering_lobes(point.hair, outgoing, incoming);
+                for (auto p = 0; p < 4; p++)
+                  lobes[p] += weight * terms[p] * emission * (mis / pdf / survive);
+              }
+            }
           }
         }
       }
@@ -539,6 +567,7 @@ static void scatter_path(const trace_walk& walk, trace_point point, ray3f ray, i
       if (incoming == vec3f{0, 0, 0} || !isfinite(incoming)) break;
       if (sample.weight == vec3f{0, 0, 0}) break;
       weight *= sample.weight;
+      if (first_hair) lobe_shares[sample.lobe] = {1, 1, 1};
     } else {
       incoming = sample_bsdfcos(point, outgoing, lobe_roulette.x, rn, more, params);
       if (incoming == vec3f{0, 0, 0} || !isfinite(incoming)) break;
@@ -546,8 +575,18 @@ static void scatter_path(const trace_walk& walk, trace_point point, ray3f ray, i
       if (!(pdf > 0) || bsdfcos == vec3f{0, 0, 0}) break;
       weight *= bsdfcos / pdf;
       bsdf_pdf = pdf;
+      if (first_hair) {
+        auto terms = eval_hair_scattering_lobes(point.hair, outgoing, incoming);
+        for (auto p = 0; p < 4; p++)
+          for (auto c = 0; c < 3; c++)
+            lobe_shares[p][c] = bsdfcos[c] > 0 ? terms[p][c] / bsdfcos[c] : 0.0f;
+      }
     }
     if (!isfinite(weight)) break;
+    if (first_hair) {
+      split_lobes = true;
+      lobe_mark   = radiance;
+    }
 
     // Russian roulette from params.roulette_bounce on, only on paths whose
     // throughput fell below the render's threshold (the parameter's or the
@@ -580,6 +619,9 @@ static void scatter_path(const trace_walk& walk, trace_point point, ray3f ray, i
     }
     if (bounce + 1 >= params.bounces || scatters_nothing(point)) break;
   }
+  if (split_lobes) {
+    for (auto p = 0; p < 4; p++) lobes[p] += lobe_shares[p] * (radiance - lobe_mark);
+  }
 }
 
 // The path tracer from a camera ray. With params.split > 1 the camera ray
@@ -589,26 +631,49 @@ static void scatter_path(const trace_walk& walk, trace_point point, ray3f ray, i
 // exactly the points first * split ... end * split - 1 of every pair of
 // dimensions past the camera's (stratified together, and any sample range
 // still renders alone).
+//
+// With `aov`, what the sample adds to the AOVs (see AOVS in the header).
+struct trace_aov_sample {
+  vec3f                albedo   = {0, 0, 0};
+  vec3f                normal   = {0, 0, 0};
+  vec3f                tangent  = {0, 0, 0};
+  std::array<vec3f, 4> lobes    = {};
+  float                depth    = 0;
+  bool                 hit      = false;
+  bool                 hair     = false;
+};
 static vec3f trace_path(const trace_walk& walk, const ray3f& camera_ray,
-    sequence_state& sequence) {
+    sequence_state& sequence, trace_aov_sample* aov = nullptr) {
   auto& [scene, bvh, context, params, threshold, rays, record, points] = walk;
   auto intersection = cast_closest(walk, camera_ray);
   if (!intersection.hit) return eval_environments(scene, context, camera_ray.d, 0);
   auto point    = eval_trace_point(scene, context, intersection, camera_ray, params);
   auto radiance = point.emission;  // camera rays take no MIS weight
+  auto lobes    = aov ? aov->lobes.data() : nullptr;
+  if (aov) {
+    aov->hit     = true;
+    aov->depth   = intersection.distance;
+    aov->hair    = point.type == material_type::hair;
+    aov->albedo  = glm::clamp(eval_albedo(point, -camera_ray.d), 0.0f, 1.0f);
+    aov->normal  = point.normal;
+    aov->tangent = point.fiber ? point.tangent : point.normal;
+  }
   if (params.bounces < 1 || scatters_nothing(point)) return radiance;
   auto split = std::max(params.split, 1);
   if (split == 1) {
-    scatter_path(walk, point, camera_ray, 0, {1, 1, 1}, sequence, radiance);
+    scatter_path(walk, point, camera_ray, 0, {1, 1, 1}, sequence, radiance, lobes);
     return radiance;
   }
   auto sample = sequence.index;
   auto sum    = vec3f{0, 0, 0};
   for (auto k = 0; k < split; k++) {
     sequence.index = sample * (uint32_t)split + (uint32_t)k;
-    scatter_path(walk, point, camera_ray, 0, {1, 1, 1}, sequence, sum);
+    scatter_path(walk, point, camera_ray, 0, {1, 1, 1}, sequence, sum, lobes);
   }
   sequence.index = sample;
+  if (aov) {
+    for (auto& lobe : aov->lobes) lobe /= (float)split;
+  }
   return radiance + sum / (float)split;
 }
 
@@ -650,7 +715,49 @@ bool check_trace_params(const scene_data& scene, const trace_params& params,
 double trace_image_bytes(const scene_data& scene, const trace_params& params) {
   auto size = camera_resolution(scene.cameras[params.camera], params.resolution);
   return (double)size.x * (double)size.y *
-         (sizeof(fixed_sum3) + sizeof(vec3f) + 3 * sizeof(uint8_t));
+             (sizeof(fixed_sum3) + sizeof(vec3f) + 3 * sizeof(uint8_t)) +
+         trace_aov_bytes(scene, params);
+}
+
+// The AOV layers' channels, in the order of the sums: three per sum, the
+// last sum holding depth, coverage and the count of samples that hit.
+static const auto trace_aov_names = std::array<std::string, 7>{
+    "albedo", "normal", "tangent", "hair_R", "hair_TT", "hair_TRT", "hair_TRRT"};
+
+double trace_aov_bytes(const scene_data& scene, const trace_params& params) {
+  if (!params.aovs) return 0;
+  auto size = camera_resolution(scene.cameras[params.camera], params.resolution);
+  // The sums, and the layers' floats when they are saved (23 channels).
+  return (double)size.x * (double)size.y *
+         (trace_aov_sums * sizeof(fixed_sum3) + 23 * sizeof(float));
+}
+
+std::vector<image_layer> get_aov_layers(int width, int height,
+    const std::vector<fixed_sum3>& aov_sums, int samples) {
+  auto pixels = (size_t)width * (size_t)height;
+  auto layers = std::vector<image_layer>{};
+  if (aov_sums.size() != pixels * trace_aov_sums) return layers;
+  for (auto k = 0; k < 7; k++) {
+    auto directions = k == 1 || k == 2;
+    layers.push_back({trace_aov_names[k],
+        directions ? std::vector<std::string>{"X", "Y", "Z"}
+                   : std::vector<std::string>{"R", "G", "B"},
+        std::vector<float>(pixels * 3)});
+  }
+  layers.push_back({"depth", {"Z"}, std::vector<float>(pixels)});
+  layers.push_back({"coverage", {"Y"}, std::vector<float>(pixels)});
+  auto scale = samples > 0 ? 1.0 / samples : 0.0;
+  for (size_t i = 0; i < pixels; i++) {
+    auto sums = &aov_sums[i * trace_aov_sums];
+    for (auto k = 0; k < 7; k++) {
+      auto value = fixed_to_double(sums[k]) * scale;
+      for (auto c = 0; c < 3; c++) layers[k].pixels[i * 3 + c] = (float)value[c];
+    }
+    auto extra = fixed_to_double(sums[7]);  // depth, hair hits, hits
+    layers[7].pixels[i] = extra[2] > 0 ? (float)(extra[0] / extra[2]) : 0.0f;
+    layers[8].pixels[i] = (float)(extra[1] * scale);
+  }
+  return layers;
 }
 
 void init_trace_state(trace_state& state, const scene_data& scene, const trace_params& params,
@@ -661,6 +768,7 @@ void init_trace_state(trace_state& state, const scene_data& scene, const trace_p
   state.first   = first;
   state.samples = 0;
   state.sums.assign((size_t)size.x * size.y, fixed_sum3{});
+  state.aov_sums.assign(params.aovs ? (size_t)size.x * size.y * trace_aov_sums : 0, fixed_sum3{});
   state.clamped = 0;
   state.row_energy.assign(size.y, 0.0);
   state.row_clamped.assign(size.y, 0.0);
@@ -808,17 +916,36 @@ static void trace_rows(trace_state& state, const scene_data& scene, const scene_
           nonfinite++;
           continue;
         }
-        auto radiance = trace_path(walk, ray, sequence);
+        auto aov      = trace_aov_sample{};
+        auto radiance = trace_path(walk, ray, sequence, params.aovs ? &aov : nullptr);
+        // The AOVs of the camera's hit count even if the path's radiance is
+        // dropped (its lobes do not).
+        auto add_aovs = [&](float lobe_scale) {
+          if (!params.aovs) return;
+          auto sums = &state.aov_sums[(size_t)pixel * trace_aov_sums];
+          add_fixed(sums[0], aov.albedo);
+          add_fixed(sums[1], aov.normal);
+          add_fixed(sums[2], aov.tangent);
+          for (auto p = 0; p < 4; p++) {
+            auto lobe = aov.lobes[p] * lobe_scale;
+            if (isfinite(lobe) && max_component(abs(lobe)) < fixed_sum_max_sample)
+              add_fixed(sums[3 + p], lobe);
+          }
+          if (aov.hit) add_fixed(sums[7], vec3f{aov.depth, aov.hair ? 1.0f : 0.0f, 1.0f});
+        };
         if (!isfinite(radiance)) {
           nonfinite++;
+          add_aovs(0);
           continue;
         }
+        auto lobe_scale = 1.0f;
         // The energies only serve the clamped share: summed when clamping.
         if (params.clamp > 0) {
           auto sample_energy = (double)radiance.x + radiance.y + radiance.z;
           energy += sample_energy;
           if (max_component(radiance) > params.clamp) {
-            radiance *= params.clamp / max_component(radiance);
+            lobe_scale = params.clamp / max_component(radiance);
+            radiance *= lobe_scale;
             clamped++;
             clamped_energy += sample_energy - ((double)radiance.x + radiance.y + radiance.z);
           }
@@ -826,9 +953,11 @@ static void trace_rows(trace_state& state, const scene_data& scene, const scene_
         // Beyond what the exact sum holds (1e29): as good as infinite.
         if (max_component(abs(radiance)) >= fixed_sum_max_sample) {
           nonfinite++;
+          add_aovs(0);
           continue;
         }
         add_fixed(sum, radiance);
+        add_aovs(lobe_scale);
       }
     }
     state.rays += rays;

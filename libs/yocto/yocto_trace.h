@@ -75,6 +75,8 @@ struct trace_params {
   // Weigh sampled hair directions by eval / pdf of the lobe mixture even
   // where no MIS needs the pdf (otherwise the lobe's own A_p / P(p)).
   bool               hair_mixture_weight = false;
+  // Also sum the AOVs of every sample (see AOVS below).
+  bool               aovs       = false;
 };
 
 }  // namespace yocto
@@ -125,6 +127,7 @@ struct trace_state {
   int                        first   = 0;  // index of the first sample
   int                        samples = 0;  // samples per pixel done so far
   std::vector<fixed_sum3>    sums    = {};
+  std::vector<fixed_sum3>    aov_sums = {};  // with params.aovs: trace_aov_sums a pixel
   std::atomic<int64_t>       rays    = 0;  // rays cast (camera, bounce, shadow)
   std::atomic<int64_t>       nonfinite = 0;  // samples dropped as NaN or Inf
   // What params.clamp did: samples clamped, and per image row the energy
@@ -172,6 +175,43 @@ texture_data get_image(const trace_state& state);
 // The same for sums of `samples` samples a pixel (what a merge of parts has).
 texture_data get_image(int width, int height, const std::vector<fixed_sum3>& sums,
     int samples);
+
+// -----------------------------------------------------------------------------
+// AOVS
+// -----------------------------------------------------------------------------
+// With params.aovs every sample adds, besides its radiance, exact sums
+// (fixed_sum3, so that the parts of a split render merge to the same bits)
+// of what its camera ray found and of its radiance split by hair lobe:
+// - albedo: the first hit's directional albedo for the camera ray's
+//   direction; hair: the model's own, eval_hair_albedo (sum of A_p at the
+//   hit's h); matte: its colour; glossy: colour (1 - F) + F at the outgoing
+//   angle; 0 where the ray escapes (OIDN's aux image for the denoiser);
+// - normal: the first hit's shading normal, facing the camera (fibres: the
+//   round fibre's normal at h); 0 where the ray escapes;
+// - tangent: fibres: the curve's tangent, root to tip (the direction its
+//   control points run); surfaces: the normal; 0 where the ray escapes;
+// - depth: the distance to the first hit, averaged over the samples that hit
+//   (0 where none does); coverage: the fraction of samples whose first hit
+//   is hair;
+// - hair_R, hair_TT, hair_TRT, hair_TRRT: the radiance of the paths by the
+//   lobe p of their first hair scattering: the light sampled there split by
+//   the lobes' terms (eval_hair_scattering_lobes), the rest of the path by
+//   the lobe sampled there (or by the lobes' shares of the sampled
+//   direction's value, where MIS needs the mixture). Per sample they sum to
+//   the radiance of the paths that scatter at hair (all but what the camera
+//   sees directly and what paths gather before reaching hair), and each is
+//   its lobe's share in expectation. Dropped (NaN) samples add no lobes;
+//   clamped ones add them clamped by the same factor.
+inline constexpr int trace_aov_sums = 8;  // fixed_sum3 a pixel
+
+// Bytes of the AOV sums and layers of a render with params.aovs (0 without).
+double trace_aov_bytes(const scene_data& scene, const trace_params& params);
+
+// The AOV layers from sums of `samples` samples a pixel (trace_aov_sums a
+// pixel): albedo (R, G, B), normal (X, Y, Z), tangent (X, Y, Z), depth (Z),
+// coverage (Y), hair_R, hair_TT, hair_TRT, hair_TRRT (R, G, B).
+std::vector<image_layer> get_aov_layers(int width, int height,
+    const std::vector<fixed_sum3>& aov_sums, int samples);
 
 // Radiance of one path from a camera ray (exposed for tests); an automatic
 // roulette threshold (0) is taken as 1 here, as no pilot runs.

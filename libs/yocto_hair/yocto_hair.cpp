@@ -460,6 +460,22 @@ float sample_hair_scattering_pdf(
   return eval_hair_scattering_and_pdf(brdf, outgoing, incoming).second;
 }
 
+std::array<vec3f, 4> eval_hair_scattering_lobes(
+    const hair_brdf& brdf, const vec3f& outgoing, const vec3f& incoming) {
+  auto  storage = hair_lobes{};
+  float products[4];
+  auto& lobes = eval_lobe_products(brdf, outgoing, incoming, storage, products);
+  auto  terms = std::array<vec3f, 4>{};
+  for (auto p = 0; p < 4; p++) terms[p] = products[p] * lobes.a[p];
+  return terms;
+}
+
+vec3f eval_hair_albedo(const hair_brdf& brdf, const vec3f& outgoing) {
+  auto  storage = hair_lobes{};
+  auto& lobes   = find_lobes(brdf, outgoing, make_angles(brdf, outgoing), storage);
+  return lobes.a[0] + lobes.a[1] + lobes.a[2] + lobes.a[3];
+}
+
 // The lobe chosen by u: p with probability a_pdf[p]; -1 if the fiber
 // returns nothing.
 static int sample_hair_lobe(const hair_lobes& lobes, float u) {
@@ -522,7 +538,7 @@ static hair_sample sample_hair_lobes(
   auto& lobes   = find_lobes(brdf, outgoing, wo, storage);
   auto  p       = sample_hair_lobe(lobes, rn.x);
   if (p < 0) return {};
-  return {sample_hair_lobe_direction(brdf, lobes, wo, p, rn), lobes.a[p] / lobes.a_pdf[p]};
+  return {sample_hair_lobe_direction(brdf, lobes, wo, p, rn), p, lobes.a[p] / lobes.a_pdf[p]};
 }
 
 // Two numbers demuxed into the four a direction takes.

@@ -25,6 +25,7 @@
 
 #include <yocto/yocto_math.h>
 
+#include <array>
 #include <utility>
 
 // -----------------------------------------------------------------------------
@@ -133,6 +134,7 @@ vec3f sample_hair_scattering(
 // A sampled direction with the weight of the lobe that drew it.
 struct hair_sample {
   vec3f incoming = {0, 0, 0};  // zero if the fiber returns nothing
+  int   lobe     = -1;         // p: 0 R, 1 TT, 2 TRT, 3 the higher orders; -1 none
   vec3f weight   = {0, 0, 0};
 };
 
@@ -156,6 +158,20 @@ float sample_hair_scattering_pdf(
 // directions, and they share every M_p N_p product.
 std::pair<vec3f, float> eval_hair_scattering_and_pdf(
     const hair_brdf& brdf, const vec3f& outgoing, const vec3f& incoming);
+
+// The terms of eval_hair_scattering one lobe at a time, M_p A_p N_p for p =
+// 0 (R), 1 (TT), 2 (TRT), 3 (TRRT and higher); they sum to it (up to
+// rounding). A renderer splits a path's light by the lobe it took with them.
+std::array<vec3f, 4> eval_hair_scattering_lobes(
+    const hair_brdf& brdf, const vec3f& outgoing, const vec3f& incoming);
+
+// Directional albedo rho(outgoing) = integral of eval_hair_scattering over
+// all incoming directions: the fraction of light from `outgoing`'s direction
+// that the fiber scatters, at the brdf's offset h. Each lobe's M_p N_p has
+// unit integral (d'Eon's M_p is normalised for every theta_o, tilted or not;
+// N_p is a normalised trimmed logistic, 1 / 2 pi for p_max), so it is exactly
+// sum_p A_p(theta_o, h), with no quadrature (tested against one).
+vec3f eval_hair_albedo(const hair_brdf& brdf, const vec3f& outgoing);
 
 // Absorption coefficient from eumelanin and pheomelanin concentrations
 // (d'Eon et al. 2011); negative concentrations count as 0.
