@@ -4,7 +4,7 @@ the pyoidn wheel of PyPI, which ships the OIDN library.
 
 Usage:
   .venv/denoise/bin/python scripts/denoise.py IMAGE.exr --output OUT
-      [--no-aux] [--aux-normal normal|tangent] [--quality high|balanced|fast]
+      [--no-aux] [--aux-normal normal|tangent] [--no-prefilter] [--quality high|balanced|fast]
       [--exposure E] [--quiet]
 
 IMAGE is an OpenEXR image of `yscene render` (or of `yscene merge`; never a
@@ -67,6 +67,8 @@ def parse_args():
                         help="denoise the beauty alone, without the albedo and normal layers")
     parser.add_argument("--aux-normal", choices=sorted(NORMALS), default="normal",
                         help="the layer given to OIDN as normals (default: normal)")
+    parser.add_argument("--no-prefilter", action="store_true",
+                        help="give OIDN the aux layers as they are (noisy), not denoised first")
     parser.add_argument("--quality", choices=("high", "balanced", "fast"), default="high",
                         help="OIDN's filter quality (default: high, for final frames)")
     parser.add_argument("--exposure", "-e", type=float, default=0.0,
@@ -137,7 +139,7 @@ def layer(spec, pixels, path, name, channels):
     if missing:
         hint = ("not a yscene render" if name == "beauty" else
                 "render it with yscene render --aovs, or denoise with --no-aux")
-        raise Failure(path, f"no {name} layer (no channel {', '.join(missing)}): {hint}")
+        raise Failure(path, f"no {name} layer (channels {', '.join(missing)} missing): {hint}")
     image = np.ascontiguousarray(pixels[:, :, [names.index(c) for c in channels]])
     bad = np.count_nonzero(~np.isfinite(image))
     if bad:
@@ -158,7 +160,10 @@ def run_filter(device, path, images, quality, hdr=False, clean_aux=False):
     float32) and returns its output, a new image."""
     what = " + ".join(images)
     output = np.zeros_like(next(iter(images.values())))
-    with pyoidn.Filter(device, pyoidn.OIDN_FILTER_TYPE_RT) as rt:
+    # Not `with`: pyoidn 2.5.1.0's Filter.__exit__ returns a true value,
+    # which would swallow a failure raised inside.
+    rt = pyoidn.Filter(device, pyoidn.OIDN_FILTER_TYPE_RT)
+    try:
         check(device, path, f"create the RT filter of {what}")
         # The arrays are shared with OIDN, not copied: they outlive the filter.
         for name, image in images.items():
@@ -171,15 +176,21 @@ def run_filter(device, path, images, quality, hdr=False, clean_aux=False):
         check(device, path, f"set up the RT filter of {what}")
         rt.execute()
         check(device, path, f"filter {what}")
+    finally:
+        rt.release()
     return output
 
 
-def denoise(device, path, beauty, albedo, normal, quality):
+def denoise(device, path, beauty, albedo, normal, quality, prefilter=True):
     """The denoised beauty. The auxiliary images, if given, are denoised
     first, each by a filter of its own, and then given as clean (OIDN's
-    prefiltering, for final frames)."""
+    prefiltering, for final frames); without prefilter they are given as
+    they are, noisy (OIDN then filters them with the beauty)."""
     if albedo is None:
         return run_filter(device, path, {"color": beauty}, quality, hdr=True)
+    if not prefilter:
+        return run_filter(device, path, {"color": beauty, "albedo": albedo, "normal": normal},
+                          quality, hdr=True)
     albedo = run_filter(device, path, {"albedo": albedo}, quality)
     normal = run_filter(device, path, {"normal": normal}, quality)
     return run_filter(device, path, {"color": beauty, "albedo": albedo, "normal": normal},
@@ -273,7 +284,8 @@ def main():
         del pixels
         temporary = create_temporary(args.output, extension)
         quality = getattr(pyoidn, f"OIDN_QUALITY_{args.quality.upper()}")
-        with pyoidn.Device(pyoidn.OIDN_DEVICE_TYPE_CPU) as device:
+        device = pyoidn.Device(pyoidn.OIDN_DEVICE_TYPE_CPU)
+        try:
             check(device, args.image, "create a CPU device")
             device.commit()
             check(device, args.image, "start its CPU device")
@@ -281,9 +293,13 @@ def main():
                                for part in ("Major", "Minor", "Patch"))
             threads = device.get_int("numThreads") or os.cpu_count()
             filter_start = time.monotonic()
-            result = denoise(device, args.image, beauty, albedo, normal, quality)
+            result = denoise(device, args.image, beauty, albedo, normal, quality,
+                             not args.no_prefilter)
             filter_seconds = time.monotonic() - filter_start
-        guides = "no aux" if args.no_aux else f"albedo + {args.aux_normal}, prefiltered"
+        finally:
+            device.release()
+        guides = "no aux" if args.no_aux else f"albedo + {args.aux_normal}" + (
+            ", not prefiltered" if args.no_prefilter else ", prefiltered")
         note = f"OIDN {version} RT, hdr, quality {args.quality}, {guides}"
         write_image(temporary, args.output, extension, result, args.exposure, note)
         temporary = None
@@ -291,7 +307,7 @@ def main():
         print(f"error: {failure}", file=sys.stderr)
         return 1
     except KeyboardInterrupt:
-        print("error: interrupted, nothing written", file=sys.stderr)
+        print("error: interrupted; nothing written", file=sys.stderr)
         return 130
     except Exception as error:  # one line, never a traceback
         print(f"error: {args.image}: {type(error).__name__}: {one_line(error)}", file=sys.stderr)

@@ -9,7 +9,7 @@ Usage: python3 tests/test_denoise.py YSCENE_PATH [unittest options]
 
 Runs itself under .venv/denoise/bin/python, the venv of
 `bash scripts/setup.sh --denoise` (pyoidn, and Debian's OpenImageIO and
-NumPy); without it, prints why it is skipped and exits 0.
+NumPy); without it, prints why it is skipped and exits 77 (CTest counts it as skipped).
 """
 
 import os
@@ -25,11 +25,15 @@ VENV = os.path.join(ROOT, ".venv", "denoise")
 VENV_PYTHON = os.path.join(VENV, "bin", "python")
 YSCENE = None  # set from the command line
 
-# The fur ball: small enough that the whole test takes seconds on 2 cores.
-STRANDS, RESOLUTION = 2000, 96
-NOISY_SAMPLES, REFERENCE_SAMPLES = 16, 1024
-# The denoised image's MSE must be below this fraction of the noisy one's.
-MARGIN = 0.8
+# The fur ball: its fibres are thinner than a pixel below about 192 pixels,
+# where the noise is mostly their coverage and OIDN gains little (96: 0.94
+# of the noisy MSE). At 256 pixels the reference takes about 10 s on 2 cores
+# and its own error, 1/16 of the noisy one's, adds to both MSEs.
+STRANDS, RESOLUTION = 2000, 256
+NOISY_SAMPLES, REFERENCE_SAMPLES = 16, 256
+# The denoised image's MSE (with aux) must be below this fraction of the
+# noisy one's; it is 0.69 on the machine this was written on.
+MARGIN = 0.85
 
 
 def step(text):
@@ -82,11 +86,6 @@ def mse(image, reference):
     return float(((image.astype("float64") - reference) ** 2).mean())
 
 
-def has_aovs():
-    """True once yscene render takes --aovs (the auxiliary layers)."""
-    return "--aovs" in checked([YSCENE, "render", "--help"])
-
-
 class DenoiseTest(unittest.TestCase):
     @classmethod
     def setUpClass(cls):
@@ -97,13 +96,9 @@ class DenoiseTest(unittest.TestCase):
         try:
             checked([YSCENE, "hair", "--style", "fur", "--strands", str(STRANDS), "--output",
                      cls.scene, "-q"])
-            cls.aovs = has_aovs()
-            # The error cases need an EXR with a normal layer and no albedo:
-            # from the render with AOVs, or made up from a plain render.
             cls.source = os.path.join(cls.tmp, "source.exr")
-            step(f"a {NOISY_SAMPLES}-spp render at {RESOLUTION}"
-                 + (" with --aovs" if cls.aovs else " (no --aovs in yscene yet)"))
-            cls.render(cls.source, NOISY_SAMPLES, *(["--aovs"] if cls.aovs else []))
+            step(f"a {NOISY_SAMPLES}-spp render at {RESOLUTION} with --aovs")
+            cls.render(cls.source, NOISY_SAMPLES, "--aovs")
         except BaseException:
             cls.folder.cleanup()
             raise
@@ -137,12 +132,11 @@ class DenoiseTest(unittest.TestCase):
         self.assertEqual(result.returncode, 0,
                          f"denoise.py failed (exit {result.returncode}):\n{result.stderr}")
         self.assertTrue(os.path.isfile(output), f"denoise.py wrote no {output}")
-        step(f"  {result.stdout.strip()}")
+        if result.stdout.strip():
+            step(f"  {result.stdout.strip()}")
         return read_rgb(output)
 
     def test_1_fur_ball(self):
-        if not self.aovs:
-            self.skipTest("yscene render has no --aovs yet")
         reference = os.path.join(self.tmp, "reference.exr")
         step(f"reference: {REFERENCE_SAMPLES} spp at {RESOLUTION}")
         start = time.monotonic()
@@ -158,8 +152,8 @@ class DenoiseTest(unittest.TestCase):
             output = os.path.join(self.tmp, f"denoised-{len(errors)}.exr")
             errors[name] = mse(self.assertDenoises(self.source, output, *options), expected)
         print(f"[test_denoise] MSE against {REFERENCE_SAMPLES} spp: noisy {noisy:.6g}, "
-              + ", ".join(f"denoised ({name}) {error:.6g}" for name, error in errors.items()),
-              flush=True)
+              + ", ".join(f"denoised ({name}) {error:.6g}" for name, error in errors.items())
+              + f"; asserted: denoised (albedo + normal) < {MARGIN} x noisy", flush=True)
         self.assertLess(errors["albedo + normal"], MARGIN * noisy,
                         f"denoised with aux: MSE {errors['albedo + normal']:.6g}, not below "
                         f"{MARGIN} x the noisy image's {noisy:.6g}")
@@ -167,8 +161,6 @@ class DenoiseTest(unittest.TestCase):
     def test_2_missing_layer(self):
         image = os.path.join(self.tmp, "no-albedo.exr")
         names = [c for c in channel_names(self.source) if not c.startswith("albedo.")]
-        if not self.aovs:
-            names += ["normal.X=0", "normal.Y=0", "normal.Z=1"]
         step("an EXR without albedo.* (oiiotool --ch): aux is an error naming the layer")
         checked(["oiiotool", self.source, "--ch", ",".join(names), "-o", image])
         output = os.path.join(self.tmp, "no-albedo-denoised.exr")
@@ -228,7 +220,7 @@ def main():
         probe = "import numpy, OpenImageIO, pyoidn"
         if not os.path.isfile(VENV_PYTHON) or run([VENV_PYTHON, "-c", probe]).returncode != 0:
             print("skipped: pyoidn not installed (bash scripts/setup.sh --denoise)")
-            return 0
+            return 77
         os.execv(VENV_PYTHON, [VENV_PYTHON, os.path.abspath(__file__), *sys.argv[1:]])
     YSCENE = os.path.abspath(sys.argv[1])
     program = unittest.main(argv=[sys.argv[0], *sys.argv[2:]], exit=False, verbosity=2)
