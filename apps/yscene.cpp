@@ -79,6 +79,13 @@ static std::string format_count(double count) {
   return buffer;
 }
 
+// A number as printf's %g writes it.
+static std::string format_number(float value) {
+  char buffer[32];
+  std::snprintf(buffer, sizeof(buffer), "%g", value);
+  return buffer;
+}
+
 // The enum value of a name from its names table (the command line has
 // checked that the name is in it).
 template <typename Enum, size_t size>
@@ -319,10 +326,10 @@ static std::string render_settings(const scene_data& scene, const trace_params& 
   line("clamp", number(params.clamp));
   // Only when on, so that the settings of renders without AOVs stay as they were.
   if (params.aovs) line("aovs", "1");
-  line("hair", std::string(params.hair_four_numbers ? "four-numbers" : "demux") +
-                   (params.hair_per_hit ? " per-hit" : "") +
-                   (params.hair_mixture_weight ? " mixture-weight" : "") +
-                   (params.hair_fast_pow ? " fast-pow" : ""));
+  line("hair", std::string(params.hair_sampling.four_numbers ? "four-numbers" : "demux") +
+                   (params.hair_sampling.per_hit ? " per-hit" : "") +
+                   (params.hair_sampling.mixture_weight ? " mixture-weight" : "") +
+                   (params.hair_sampling.fast_pow ? " fast-pow" : ""));
   line("curves", options.curves + (options.curves == "lines"
                                         ? " " + std::to_string(options.segments) : "") +
                      (options.flat_curves ? " flat" : " round") + " pieces " +
@@ -825,17 +832,17 @@ static int run_info(const info_options& options) {
           {"emission", vec3(material.emission)},
           {"emission_tex", texture_text(material.emission_tex)}};
       if (material.type == material_type::hair) {
-        auto& hair           = material.hair;
-        auto  used           = make_hair_precomputed(hair);
-        item["sigma_a"]      = vec3(used.sigma_a);
+        // Every parameter of the table, null if optional and not given;
+        // sigma_a is the absorption the model uses, sigma_a_from its source.
+        auto& hair = material.hair;
+        for (auto& parameter : hair_parameters) {
+          auto value = get_hair_parameter(hair, parameter);
+          if (parameter.has && !(hair.*parameter.has)) item[parameter.name] = nullptr;
+          else if (parameter.kind == hair_parameter_kind::number) item[parameter.name] = value.x;
+          else item[parameter.name] = vec3(value);
+        }
+        item["sigma_a"]      = vec3(make_hair_precomputed(hair).sigma_a);
         item["sigma_a_from"] = hair_sigma_a_source(hair);
-        item["eumelanin"]    = hair.eumelanin;
-        item["pheomelanin"]  = hair.pheomelanin;
-        item["color"]        = vec3(hair.color);
-        item["beta_m"]       = hair.beta_m;
-        item["beta_n"]       = hair.beta_n;
-        item["alpha"]        = hair.alpha;
-        item["eta"]          = hair.eta;
       } else {
         item["color"]     = vec3(material.color);
         item["color_tex"] = texture_text(material.color_tex);
@@ -914,10 +921,23 @@ static int run_info(const info_options& options) {
       else
         std::snprintf(source, sizeof(source), "from melanin (eumelanin %g, pheomelanin %g)",
             hair.eumelanin, hair.pheomelanin);
-      std::printf("material %s: hair, sigma_a [%g %g %g] %s, beta_m %g, beta_n %g, alpha %g "
-                  "deg, eta %g\n",
-          name.c_str(), used.sigma_a.x, used.sigma_a.y, used.sigma_a.z, source,
-          hair.beta_m, hair.beta_n, hair.alpha, hair.eta);
+      // The fiber's parameters, then the variation ones the material sets.
+      auto values = std::string{};
+      for (auto& parameter : hair_parameters) {
+        if (parameter.group == hair_parameter_group::pigment) continue;
+        if (parameter.group == hair_parameter_group::variation &&
+            !is_hair_parameter_set(hair, parameter))
+          continue;
+        auto value = get_hair_parameter(hair, parameter);
+        values += std::string(", ") + parameter.name + " " +
+                  (parameter.kind == hair_parameter_kind::number
+                          ? format_number(value.x)
+                          : "[" + format_number(value.x) + " " + format_number(value.y) +
+                                " " + format_number(value.z) + "]") +
+                  (parameter.unit[0] != 0 ? std::string(" ") + parameter.unit : "");
+      }
+      std::printf("material %s: hair, sigma_a [%g %g %g] %s%s\n", name.c_str(), used.sigma_a.x,
+          used.sigma_a.y, used.sigma_a.z, source, values.c_str());
     } else {
       auto c = material.color;
       std::printf("material %s: %s, color [%g %g %g]%s%s, emission [%g %g %g]%s\n",
@@ -984,16 +1004,40 @@ static int run_convert(const std::string& input, const std::string& output,
 // -----------------------------------------------------------------------------
 
 struct hair_options {
-  std::string        output      = "";
-  std::string        style       = "straight";
-  std::vector<float> sigma_a     = {};
-  std::vector<float> color       = {};
-  bool               has_melanin = false;
-  std::string        fit_camera   = "";     // scene whose first camera places the strands
-  float              fit_fraction = 0.75f;  // of the image the strands span
-  float              fit_distance = 0;      // 0: where the camera sees them now
-  bool               quiet        = false;  // nothing printed on success
+  std::string output       = "";
+  std::string style        = "straight";
+  std::string fit_camera   = "";     // scene whose first camera places the strands
+  float       fit_fraction = 0.75f;  // of the image the strands span
+  float       fit_distance = 0;      // 0: where the camera sees them now
+  bool        quiet        = false;  // nothing printed on success
 };
+
+// `yscene hair --name-with-dashes`: one number, or r g b, that must lie in
+// the parameter's range; the values go to `values` (empty if not given).
+static void add_hair_parameter_option(
+    CLI::App* command, const hair_parameter& parameter, std::vector<float>& values) {
+  auto name = "--" + std::string(parameter.name);
+  std::replace(name.begin(), name.end(), '_', '-');
+  auto range = format_hair_parameter_range(parameter);
+  auto help  = std::string(parameter.doc) + " (" + range;
+  if (!parameter.has && parameter.kind == hair_parameter_kind::number)
+    help += ", default " + format_number(parameter.default_value.x);
+  if (!parameter.has && parameter.kind == hair_parameter_kind::rgb)
+    help += ", default " + format_number(parameter.default_value.x) + " " +
+            format_number(parameter.default_value.y) + " " +
+            format_number(parameter.default_value.z);
+  auto in_range = [&parameter, range](std::string& text) {
+    auto end   = (char*)nullptr;
+    auto value = std::strtof(text.c_str(), &end);
+    if (text.empty() || *end != 0) return "expected a number, got " + text;
+    if (!is_hair_parameter_valid(parameter, vec3f{value}))
+      return "expected a number " + range + ", got " + text;
+    return std::string{};
+  };
+  command->add_option(name, values, help + ")")
+      ->expected(parameter.kind == hair_parameter_kind::number ? 1 : 3)
+      ->check(CLI::Validator(in_range, ""));
+}
 
 // Offset of pbrt's WorldBegin in a scene's text (comments and strings
 // skipped), or npos.
@@ -1055,16 +1099,8 @@ static bool load_first_camera(const std::string& filename, camera_data& camera,
 }
 
 static int run_hair(const hair_options& options, hair_style_params params,
-    hair_material material) {
+    const hair_material& material) {
   params.style = enum_from_name<hair_style>(hair_style_names, options.style);
-  if (options.sigma_a.size() == 3) {
-    material.has_sigma_a = true;
-    material.sigma_a     = {options.sigma_a[0], options.sigma_a[1], options.sigma_a[2]};
-  }
-  if (options.color.size() == 3) {
-    material.has_color = true;
-    material.color     = {options.color[0], options.color[1], options.color[2]};
-  }
   auto start     = std::chrono::steady_clock::now();
   auto error     = std::string{};
   auto extension = path_extension(options.output);
@@ -1167,7 +1203,7 @@ static int run_main(int argc, const char** argv) {
   render->add_option("--exposure,-e", render_opts.exposure, "exposure for png/jpg (stops)");
   render->add_option("--camera", render_opts.camera, "camera name");
   render->add_flag("--flat-curves", render_opts.flat_curves, "ray-facing flat fibers");
-  render->add_flag("--hair-four-numbers", params.hair_four_numbers,
+  render->add_flag("--hair-four-numbers", params.hair_sampling.four_numbers,
       "sample hair with four random numbers instead of demuxing two");
   render->add_flag("--quiet,-q", render_opts.quiet,
       "print nothing on success (no progress, no summary; errors and warnings still go to "
@@ -1177,12 +1213,12 @@ static int run_main(int argc, const char** argv) {
       ->check(CLI::IsMember({"native", "lines"}));
   render->add_option("--segments", render_opts.segments, "line segments per curve with --curves lines")
       ->check(CLI::Range(1, 64));
-  render->add_flag("--hair-per-hit", params.hair_per_hit,
+  render->add_flag("--hair-per-hit", params.hair_sampling.per_hit,
       "compute the hair material terms at every hit (as the thesis), not once per material");
-  render->add_flag("--hair-mixture-weight", params.hair_mixture_weight,
+  render->add_flag("--hair-mixture-weight", params.hair_sampling.mixture_weight,
       "weigh sampled hair directions by eval / pdf of the lobe mixture even where no MIS needs "
       "the pdf (by default the sampled lobe's own weight, which skips the evaluation)");
-  render->add_flag("--hair-fast-pow", params.hair_fast_pow,
+  render->add_flag("--hair-fast-pow", params.hair_sampling.fast_pow,
       "hair roughness powers by repeated squaring instead of std::pow (matters with --hair-per-hit)");
   render->add_flag("--no-flatten", render_opts.no_flatten,
       "keep every instance an Embree instance (no single-level BVH for identity frames)");
@@ -1260,7 +1296,6 @@ static int run_main(int argc, const char** argv) {
 
   auto hair_opts     = hair_options{};
   auto hair_params   = hair_style_params{};
-  auto hair_material_params = hair_material{};
   auto hair = app.add_subcommand("hair", "generate a hair scene or stand-in hair geometry");
   hair->add_option("--style", hair_opts.style, "straight, curly, curls, block or fur")
       ->check(CLI::IsMember(hair_style_names));
@@ -1284,22 +1319,10 @@ static int run_main(int argc, const char** argv) {
   hair->add_option("--fit-distance", hair_opts.fit_distance,
           "with --fit-camera: distance along the view axis (0: where the camera sees them)")
       ->check(CLI::NonNegativeNumber);
-  hair->add_option("--eumelanin", hair_material_params.eumelanin, "eumelanin concentration")
-      ->check(CLI::NonNegativeNumber);
-  hair->add_option("--pheomelanin", hair_material_params.pheomelanin, "pheomelanin concentration")
-      ->check(CLI::NonNegativeNumber);
-  hair->add_option("--sigma-a", hair_opts.sigma_a, "absorption r g b (overrides colours)")
-      ->expected(3);
-  hair->add_option("--color", hair_opts.color, "hair colour r g b (overrides melanin)")
-      ->expected(3);
-  hair->add_option("--beta-m", hair_material_params.beta_m, "longitudinal roughness")
-      ->check(CLI::Range(0.0f, 1.0f));
-  hair->add_option("--beta-n", hair_material_params.beta_n, "azimuthal roughness")
-      ->check(CLI::Range(0.0f, 1.0f));
-  hair->add_option("--alpha", hair_material_params.alpha, "scale tilt in degrees")
-      ->check(CLI::Range(-90.0f, 90.0f));
-  hair->add_option("--eta", hair_material_params.eta, "index of refraction")
-      ->check(CLI::Range(1.0f, 10.0f));
+  // The material's parameters: one option per row of hair_parameters.
+  auto hair_values = std::vector<std::vector<float>>(std::size(hair_parameters));
+  for (auto k = 0; k < (int)std::size(hair_parameters); k++)
+    add_hair_parameter_option(hair, hair_parameters[k], hair_values[k]);
 
   try {
     app.parse(argc, argv);
@@ -1322,7 +1345,14 @@ static int run_main(int argc, const char** argv) {
   } else if (info->parsed()) {
     return run_info(info_opts);
   } else if (hair->parsed()) {
-    return run_hair(hair_opts, hair_params, hair_material_params);
+    auto material = hair_material{};
+    for (auto k = 0; k < (int)std::size(hair_parameters); k++) {
+      auto& values = hair_values[k];
+      if (values.empty()) continue;
+      set_hair_parameter(material, hair_parameters[k],
+          values.size() == 3 ? vec3f{values[0], values[1], values[2]} : vec3f{values[0]});
+    }
+    return run_hair(hair_opts, hair_params, material);
   } else if (convert->parsed()) {
     pbrt.curves_as_lines = curves_mode == "lines";
     return run_convert(convert_in, convert_out, pbrt, convert_quiet);

@@ -140,7 +140,7 @@ TEST(bench, per_hit_hair_terms_give_the_per_material_image) {
   auto setup  = make_setup();
   auto render = [&](bool per_hit) {
     auto tparams         = setup.params;
-    tparams.hair_per_hit = per_hit;
+    tparams.hair_sampling.per_hit = per_hit;
     auto state           = trace_state{};
     init_trace_state(state, setup.scene, tparams);
     trace_samples(state, setup.scene, setup.bvh, setup.context, tparams, tparams.samples);

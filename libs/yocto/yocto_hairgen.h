@@ -57,7 +57,9 @@ texture_data make_sky_texture(int width, int height, const vec3f& sun_direction)
 
 // A complete scene: camera, sky environment, the strands with a hair
 // material, and the head sphere (head styles), a sphere beside the block, or
-// the grey unit sphere under the fur in a white environment (fur).
+// the grey unit sphere under the fur in a white environment (fur). The hair
+// material is `hair`, every parameter as given (variation included), but for
+// the curls' four locks, which take their own melanin instead of its pigment.
 scene_data make_hair_scene(const hair_style_params& params, const hair_material& hair);
 
 // Writes curves in pbrt's syntax (`Shape "curve"`, one per Bezier segment,

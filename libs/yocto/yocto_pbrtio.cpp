@@ -1164,43 +1164,57 @@ static float get_roughness(pbrt_state& state, float default_roughness) {
   return pbrt_roughness_to_yocto(roughness, get_bool(state, "remaproughness", true));
 }
 
-// pbrt's hair material with pbrt's precedence: sigma_a, else colour, else
-// melanin (one pigment given makes the other 0), else eumelanin 1.3.
+// pbrt's hair material: the rows of hair_parameters that pbrt has, under
+// pbrt's names, with pbrt's precedence: sigma_a, else colour, else melanin
+// (one pigment given makes the other 0), else eumelanin 1.3. A value the
+// material takes must lie in its row's range.
 static material_data make_hair_material(pbrt_state& state) {
-  auto material = material_data{};
-  material.type = material_type::hair;
-  auto& hair    = material.hair;
-  auto defaults = hair_material{};
-  hair.beta_m   = get_float(state, "beta_m", defaults.beta_m);
-  hair.beta_n   = get_float(state, "beta_n", defaults.beta_n);
-  hair.alpha    = get_float(state, "alpha", defaults.alpha);
-  hair.eta      = get_float(state, "eta", defaults.eta);
-  auto sigma_a     = find_param(state, "sigma_a");
-  auto color       = find_param(state, "color") ? find_param(state, "color")
-                                                : find_param(state, "reflectance");
-  auto eumelanin   = find_param(state, "eumelanin");
-  auto pheomelanin = find_param(state, "pheomelanin");
-  if (sigma_a) {
-    hair.has_sigma_a = true;
-    hair.sigma_a     = get_rgb(state, "sigma_a", {0, 0, 0});
-  } else if (color) {
-    hair.has_color = true;
-    hair.color     = get_rgb(state, color->name, {0, 0, 0});
-  } else if (eumelanin || pheomelanin) {
-    hair.eumelanin   = get_float(state, "eumelanin", 0);
-    hair.pheomelanin = get_float(state, "pheomelanin", 0);
-  }
-  // Parameters that lost to a higher-precedence one are not "ignored".
-  for (auto name : {"color", "reflectance", "eumelanin", "pheomelanin"}) find_param(state, name);
-  auto bad = [](float value, float min, float max) {
-    return !(value >= min && value <= max);
+  struct given_parameter {
+    const hair_parameter* parameter = nullptr;
+    const pbrt_param*     param     = nullptr;
+    vec3f                 value     = {0, 0, 0};
   };
-  if (bad(hair.beta_m, 0, 1) || bad(hair.beta_n, 0, 1))
-    set_error(state, "beta_m and beta_n must be in [0, 1]");
-  if (bad(hair.eta, 1, 10)) set_error(state, "eta must be in [1, 10]");
-  if (bad(hair.alpha, -90, 90)) set_error(state, "alpha must be in [-90, 90] degrees");
-  if (hair.eumelanin < 0 || hair.pheomelanin < 0 || min_component(hair.sigma_a) < 0)
-    set_error(state, "pigment concentrations and sigma_a must be non-negative");
+  auto given = std::vector<given_parameter>{};
+  for (auto& parameter : hair_parameters) {
+    if (parameter.pbrt[0] == 0) continue;
+    // Both names are looked up, so that neither is reported as ignored.
+    auto param = find_param(state, parameter.pbrt);
+    auto other = parameter.pbrt_alias[0] != 0 ? find_param(state, parameter.pbrt_alias) : nullptr;
+    if (!param) param = other;
+    if (!param) continue;
+    auto value = parameter.kind == hair_parameter_kind::number
+                     ? vec3f{get_float(state, param->name, 0)}
+                     : get_rgb(state, param->name, {0, 0, 0});
+    given.push_back({&parameter, param, value});
+  }
+  auto find = [&](const std::string& name) {
+    for (auto i = 0; i < (int)given.size(); i++)
+      if (given[i].parameter->name == name) return i;
+    return -1;
+  };
+  // The pigment: sigma_a, else colour, else both melanins.
+  auto sigma_a = find("sigma_a"), color = find("color");
+  auto eumelanin = find("eumelanin"), pheomelanin = find("pheomelanin");
+  auto pigment   = sigma_a >= 0 ? sigma_a : color;
+  auto material  = material_data{};
+  material.type  = material_type::hair;
+  for (auto i = 0; i < (int)given.size(); i++) {
+    auto& [parameter, param, value] = given[i];
+    if (parameter->group == hair_parameter_group::pigment && pigment >= 0 && i != pigment)
+      continue;
+    if (!is_hair_parameter_valid(*parameter, value)) {
+      char text[96];
+      if (parameter->kind == hair_parameter_kind::number)
+        std::snprintf(text, sizeof(text), "%g", value.x);
+      else std::snprintf(text, sizeof(text), "[%g %g %g]", value.x, value.y, value.z);
+      set_error(state, "parameter " + param_decl(*param) + " must be " +
+                           format_hair_parameter_range(*parameter) + ", got " + text,
+          param->line);
+    }
+    set_hair_parameter(material.hair, *parameter, value);
+  }
+  if (pigment < 0 && eumelanin >= 0 && pheomelanin < 0) material.hair.pheomelanin = 0;
+  if (pigment < 0 && pheomelanin >= 0 && eumelanin < 0) material.hair.eumelanin = 0;
   return material;
 }
 
@@ -2255,10 +2269,11 @@ static bool load_hair_model(const std::string& filename, shape_data& shape,
     return false;
   }
   // The points read, then the spline through them: up to three control
-  // points with a radius and a curve per point.
+  // points with a radius (and a colour) and a curve per point.
   auto needed = (double)points * (sizeof(vec3f) + sizeof(float)) +
                 3.0 * (double)points * (sizeof(vec3f) + sizeof(float)) +
-                (double)points * sizeof(vec4i);
+                (double)points * sizeof(vec4i) +
+                ((flags & hair_has_color) ? 4.0 * (double)points * sizeof(vec3f) : 0.0);
   if (!check_load_memory(
           filename, "the spline through " + std::to_string(points) + " points", needed, error))
     return false;
@@ -2303,19 +2318,23 @@ static bool load_hair_model(const std::string& filename, shape_data& shape,
       return false;
     }
   }
-  if (color) {
-    if (flags & hair_has_color) {
-      auto sum = vec3f{0, 0, 0};
-      for (auto i = (uint64_t)0; i < points; i++) {
-        auto offset = offset_color + 12 * i;
-        auto c      = vec3f{read_float(offset), read_float(offset + 4), read_float(offset + 8)};
-        if (isfinite(c)) sum += c;
-      }
-      *color = points ? sum / (float)points : vec3f{0, 0, 0};
-    } else {
-      *color = {header.default_color[0], header.default_color[1], header.default_color[2]};
+  // Per-point colours, when the file has them: the shape's colours (clamped
+  // into (0, 1), where Chiang's inversion to an absorption holds; a
+  // non-finite one as the file's average), and their average the model's.
+  auto colors  = std::vector<vec3f>{};
+  auto average = vec3f{header.default_color[0], header.default_color[1], header.default_color[2]};
+  if (flags & hair_has_color) {
+    auto sum = vec3f{0, 0, 0};
+    colors.resize(points);
+    for (auto i = (uint64_t)0; i < points; i++) {
+      auto offset = offset_color + 12 * i;
+      colors[i]   = vec3f{read_float(offset), read_float(offset + 4), read_float(offset + 8)};
+      if (isfinite(colors[i])) sum += colors[i];
     }
+    average = points ? sum / (float)points : vec3f{0, 0, 0};
+    for (auto& c : colors) c = glm::clamp(isfinite(c) ? c : average, vec3f{0.01f}, vec3f{0.99f});
   }
+  if (color) *color = average;
   if (has_color_array) *has_color_array = (flags & hair_has_color) != 0;
   // A Catmull-Rom spline through each strand's points.
   shape.positions.reserve(points * 3);
@@ -2325,7 +2344,9 @@ static bool load_hair_model(const std::string& filename, shape_data& shape,
     auto count = strand_segments(s) + 1;
     append_catmull_rom_strand(shape,
         std::vector<vec3f>(positions.begin() + first, positions.begin() + first + count),
-        std::vector<float>(radii.begin() + first, radii.begin() + first + count));
+        std::vector<float>(radii.begin() + first, radii.begin() + first + count),
+        colors.empty() ? std::vector<vec3f>{}
+                       : std::vector<vec3f>(colors.begin() + first, colors.begin() + first + count));
     first += count;
   }
   return true;

@@ -4,6 +4,10 @@
 
 #include "yocto_scene.h"
 
+#include <array>
+#include <cstring>
+#include <unordered_map>
+
 #include <cmath>
 #include <cstdio>
 
@@ -119,6 +123,90 @@ vec3f eval_environment(const scene_data& scene, const environment_data& environm
 }  // namespace yocto
 
 // -----------------------------------------------------------------------------
+// HAIR PARAMETERS
+// -----------------------------------------------------------------------------
+namespace yocto {
+
+// Each row reads its value through the pointer of its kind, and its default
+// is hair_material{}'s (a number's in every component).
+static constexpr bool hair_parameters_agree_with_hair_material() {
+  constexpr auto defaults = hair_material{};
+  for (auto& parameter : hair_parameters) {
+    auto number = parameter.kind == hair_parameter_kind::number;
+    if (number != (parameter.number != nullptr) || number == (parameter.rgb != nullptr))
+      return false;
+    auto value = number ? vec3f{defaults.*parameter.number} : defaults.*parameter.rgb;
+    if (value != parameter.default_value) return false;
+  }
+  return true;
+}
+static_assert(hair_parameters_agree_with_hair_material(),
+    "a row of hair_parameters disagrees with hair_material's kind or default");
+
+const hair_parameter* find_hair_parameter(const std::string& key) {
+  for (auto& parameter : hair_parameters)
+    if (key == parameter.name || (parameter.alias[0] != 0 && key == parameter.alias))
+      return &parameter;
+  return nullptr;
+}
+
+vec3f get_hair_parameter(const hair_material& material, const hair_parameter& parameter) {
+  return parameter.kind == hair_parameter_kind::number ? vec3f{material.*parameter.number}
+                                                       : material.*parameter.rgb;
+}
+
+void set_hair_parameter(
+    hair_material& material, const hair_parameter& parameter, const vec3f& value) {
+  if (parameter.kind == hair_parameter_kind::number) material.*parameter.number = value.x;
+  else material.*parameter.rgb = value;
+  if (parameter.has) material.*parameter.has = true;
+}
+
+bool is_hair_parameter_set(const hair_material& material, const hair_parameter& parameter) {
+  if (parameter.has) return material.*parameter.has;
+  return get_hair_parameter(material, parameter) != parameter.default_value;
+}
+
+bool is_hair_parameter_valid(const hair_parameter& parameter, const vec3f& value) {
+  for (auto c : {value.x, value.y, value.z}) {
+    auto above = parameter.min_open ? c > parameter.min : c >= parameter.min;
+    auto below = parameter.max_open ? c < parameter.max : c <= parameter.max;
+    if (!(above && below)) return false;  // NaN fails both
+  }
+  return true;
+}
+
+std::string format_hair_parameter_range(const hair_parameter& parameter) {
+  char buffer[96];
+  if (parameter.max == flt_max) {
+    std::snprintf(buffer, sizeof(buffer), "%s %g", parameter.min_open ? ">" : ">=",
+        parameter.min);
+  } else {
+    std::snprintf(buffer, sizeof(buffer), "in %c%g, %g%c", parameter.min_open ? '(' : '[',
+        parameter.min, parameter.max, parameter.max_open ? ')' : ']');
+  }
+  return buffer;
+}
+
+bool check_hair_material(const hair_material& material, std::string& error) {
+  for (auto& parameter : hair_parameters) {
+    if (parameter.has && !(material.*parameter.has)) continue;
+    auto value = get_hair_parameter(material, parameter);
+    if (is_hair_parameter_valid(parameter, value)) continue;
+    char text[96];
+    if (parameter.kind == hair_parameter_kind::number)
+      std::snprintf(text, sizeof(text), "%g", value.x);
+    else std::snprintf(text, sizeof(text), "[%g %g %g]", value.x, value.y, value.z);
+    error = std::string(parameter.name) + " " + text + " is not " +
+            format_hair_parameter_range(parameter);
+    return false;
+  }
+  return true;
+}
+
+}  // namespace yocto
+
+// -----------------------------------------------------------------------------
 // BOUNDS AND VALIDATION
 // -----------------------------------------------------------------------------
 namespace yocto {
@@ -147,6 +235,32 @@ struct scene_hasher {
     (add_bytes(&values, sizeof(values)), ...);
   }
   void add(const frame3f& frame) { add_values(frame.x, frame.y, frame.z, frame.o); }
+  // Every hair parameter: the values in the table's order, then the has_
+  // flags; first of the parameters that are not variation, then of those that
+  // are, if some value or flag of them is away from its default, so that
+  // materials without variation keep the fingerprint they had before it.
+  void add(const hair_material& hair) {
+    auto add_rows = [&](bool variation) {
+      auto in_rows = [&](const hair_parameter& parameter) {
+        return (parameter.group == hair_parameter_group::variation) == variation;
+      };
+      for (auto& parameter : hair_parameters) {
+        if (!in_rows(parameter)) continue;
+        if (parameter.kind == hair_parameter_kind::number) add_values(hair.*parameter.number);
+        else add_values(hair.*parameter.rgb);
+      }
+      for (auto& parameter : hair_parameters)
+        if (in_rows(parameter) && parameter.has) add_values(hair.*parameter.has);
+    };
+    auto varies = false;
+    for (auto& parameter : hair_parameters) {
+      if (parameter.group != hair_parameter_group::variation) continue;
+      varies |= get_hair_parameter(hair, parameter) != parameter.default_value ||
+                (parameter.has && hair.*parameter.has);
+    }
+    add_rows(false);
+    if (varies) add_rows(true);
+  }
 };
 
 uint64_t fingerprint_scene(const scene_data& scene) {
@@ -165,11 +279,9 @@ uint64_t fingerprint_scene(const scene_data& scene) {
     hasher.add(texture.pixels);
   }
   for (auto& material : scene.materials) {
-    auto& hair = material.hair;
     hasher.add_values(material.type, material.emission, material.color, material.roughness,
-        material.ior, material.emission_tex, material.color_tex, hair.sigma_a, hair.color,
-        hair.eumelanin, hair.pheomelanin, hair.beta_m, hair.beta_n, hair.alpha, hair.eta,
-        hair.has_sigma_a, hair.has_color);
+        material.ior, material.emission_tex, material.color_tex);
+    hasher.add(material.hair);
   }
   for (auto& instance : scene.instances) {
     hasher.add(instance.frame);
@@ -397,6 +509,11 @@ bool validate_scene(const scene_data& scene, std::string& error) {
         return false;
       }
     }
+    auto hair_error = std::string{};
+    if (material.type == material_type::hair && !check_hair_material(material.hair, hair_error)) {
+      error = element_name(scene.material_names, i, "material") + ": " + hair_error;
+      return false;
+    }
   }
   for (auto i = 0; i < (int)scene.environments.size(); i++) {
     if (!check_frame(scene.environments[i].frame,
@@ -559,6 +676,94 @@ fiber_point eval_fiber_point(const scene_data& scene, const instance_data& insta
   return point;
 }
 
+vec2f strand_random(const vec3f& root) {
+  // SplitMix64's finaliser over the bits, one coordinate at a time.
+  auto mix = [](uint64_t x) {
+    x += 0x9e3779b97f4a7c15ULL;
+    x = (x ^ (x >> 30)) * 0xbf58476d1ce4e5b9ULL;
+    x = (x ^ (x >> 27)) * 0x94d049bb133111ebULL;
+    return x ^ (x >> 31);
+  };
+  auto hash = (uint64_t)0x73747261ULL;  // "stra"
+  for (auto c = 0; c < 3; c++) {
+    auto value = root[c] == 0 ? 0.0f : root[c];  // -0 and 0 alike
+    auto bits  = (uint32_t)0;
+    std::memcpy(&bits, &value, sizeof(bits));
+    hash = mix(hash ^ bits);
+  }
+  // 24 bits each: floats in [0, 1) that never round to 1.
+  return {(float)(hash >> 40) * 0x1p-24f, (float)((hash >> 8) & 0xffffff) * 0x1p-24f};
+}
+
+fiber_strands make_fiber_strands(const shape_data& shape) {
+  auto strands  = fiber_strands{};
+  auto curves   = !shape.curves.empty();
+  auto count    = (int)(curves ? shape.curves.size() : shape.lines.size());
+  auto start_of = [&](int i) { return curves ? shape.curves[i].x : shape.lines[i].x; };
+  auto end_of   = [&](int i) { return curves ? shape.curves[i].w : shape.lines[i].y; };
+  // Segments by the position they start at (bits: exact matches only).
+  auto key = [&](int vertex) {
+    auto& p = shape.positions[vertex];
+    auto  x = vec3f{p.x == 0 ? 0.0f : p.x, p.y == 0 ? 0.0f : p.y, p.z == 0 ? 0.0f : p.z};
+    auto  bits = std::array<uint32_t, 3>{};
+    std::memcpy(bits.data(), &x[0], sizeof(bits));
+    return bits;
+  };
+  struct key_hash {
+    size_t operator()(const std::array<uint32_t, 3>& k) const {
+      return ((size_t)k[0] * 0x9e3779b1u) ^ ((size_t)k[1] * 0x85ebca6bu) ^ k[2];
+    }
+  };
+  auto starting = std::unordered_map<std::array<uint32_t, 3>, std::vector<int>, key_hash>{};
+  starting.reserve(count);
+  for (auto i = 0; i < count; i++) starting[key(start_of(i))].push_back(i);
+  // Each segment continues the first segment (in file order) that ends where
+  // it starts and is not continued yet: the same chains whatever the order
+  // of the strands in the file, unless strands touch.
+  auto next = std::vector<int>(count, -1), previous = std::vector<int>(count, -1);
+  for (auto i = 0; i < count; i++) {
+    auto found = starting.find(key(end_of(i)));
+    if (found == starting.end()) continue;
+    for (auto j : found->second) {
+      if (j == i || previous[j] >= 0) continue;
+      next[i] = j, previous[j] = i;
+      break;
+    }
+  }
+  strands.strand.assign(count, -1);
+  strands.u.assign(count, {0, 0});
+  auto walk = [&](int root) {
+    auto id    = (int)strands.starts.size();
+    auto first = (int)strands.segments.size();
+    strands.starts.push_back(first);
+    for (auto i = root; i >= 0 && strands.strand[i] < 0; i = next[i]) {
+      strands.strand[i] = id;
+      strands.segments.push_back(i);
+    }
+    // Place along the strand by the chords of its segments.
+    auto total = 0.0f;
+    for (auto k = first; k < (int)strands.segments.size(); k++) {
+      auto i = strands.segments[k];
+      total += length(shape.positions[end_of(i)] - shape.positions[start_of(i)]);
+    }
+    auto run = 0.0f, n = (float)(strands.segments.size() - first);
+    for (auto k = first; k < (int)strands.segments.size(); k++) {
+      auto i      = strands.segments[k];
+      auto length_i = length(shape.positions[end_of(i)] - shape.positions[start_of(i)]);
+      strands.u[i] = total > 0 ? vec2f{run / total, (run + length_i) / total}
+                               : vec2f{(k - first) / n, (k - first + 1) / n};
+      run += length_i;
+    }
+    strands.random.push_back(strand_random(shape.positions[start_of(root)]));
+  };
+  for (auto i = 0; i < count; i++)
+    if (previous[i] < 0) walk(i);
+  for (auto i = 0; i < count; i++)
+    if (strands.strand[i] < 0) walk(i);  // closed loops
+  strands.starts.push_back((int)strands.segments.size());
+  return strands;
+}
+
 ray3f spawn_fiber_ray(const vec3f& axis, const vec3f& tangent, float radius,
     const vec3f& side, const vec3f& direction) {
   auto away = direction - dot(direction, tangent) * tangent;
@@ -597,9 +802,18 @@ shape_data make_sphere_shape(int steps, float radius) {
 }
 
 void append_catmull_rom_strand(shape_data& shape, const std::vector<vec3f>& points,
-    const std::vector<float>& radii) {
+    const std::vector<float>& radii, const std::vector<vec3f>& colors) {
   auto n = (int)std::min(points.size(), radii.size());
   if (n < 2) return;
+  if ((int)colors.size() >= n) {
+    // Control points' colours as their radii: thirds between the points'.
+    shape.colors.push_back(colors[0]);
+    for (auto i = 0; i < n - 1; i++) {
+      shape.colors.push_back((2.0f * colors[i] + colors[i + 1]) / 3.0f);
+      shape.colors.push_back((colors[i] + 2.0f * colors[i + 1]) / 3.0f);
+      shape.colors.push_back(colors[i + 1]);
+    }
+  }
   // Tangents m_i = (p_{i+1} - p_{i-1}) / 2; the chord at the ends.
   auto tangent = [&](int i) {
     if (i == 0) return points[1] - points[0];

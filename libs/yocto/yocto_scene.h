@@ -81,6 +81,9 @@ struct shape_data {
   std::vector<vec3f> normals   = {};
   std::vector<vec2f> texcoords = {};
   std::vector<float> radius    = {};
+  // Per vertex, optional: fibres' own colours (Cem Yuksel's .hair files),
+  // which a hair material given by colour takes at each point.
+  std::vector<vec3f> colors    = {};
 };
 
 struct instance_data {
@@ -130,6 +133,133 @@ struct scene_data {
   scene_render_settings settings  = {};
   std::string           copyright = "";
 };
+
+}  // namespace yocto
+
+// -----------------------------------------------------------------------------
+// HAIR PARAMETERS
+// -----------------------------------------------------------------------------
+namespace yocto {
+
+// A hair parameter's value: one number, or three (a colour or an absorption).
+enum struct hair_parameter_kind { number, rgb };
+
+// What a parameter is about: the pigment (sigma_a, else color, else melanin),
+// the fiber's roughness, tilt and index, or variation across a groom (those
+// keys are new: files, `info` text and fingerprints of materials that leave
+// them at their defaults stay as they were before them).
+enum struct hair_parameter_group { pigment, fiber, variation };
+
+// One row of hair_parameters. A value is read and written through the
+// member pointer of its kind; numbers travel as vec3f with the value in every
+// component, so that ranges and defaults apply to both kinds alike.
+struct hair_parameter {
+  const char*            name          = "";  // json key; `yscene hair --name-with-dashes`
+  hair_parameter_kind    kind          = hair_parameter_kind::number;
+  hair_parameter_group   group         = hair_parameter_group::fiber;
+  float                  min           = 0;        // valid range, of each component
+  float                  max           = flt_max;  // flt_max: no upper bound
+  bool                   min_open      = false;    // min itself is not valid
+  bool                   max_open      = false;    // max itself is not valid
+  vec3f                  default_value = {0, 0, 0};  // hair_material{}'s value
+  float hair_material::* number        = nullptr;  // the value, kind number
+  vec3f hair_material::* rgb           = nullptr;  // the value, kind rgb
+  bool hair_material::*  has           = nullptr;  // optional keys: set when given
+  const char*            alias         = "";  // json spelling also read (camelCase)
+  const char*            pbrt          = "";  // pbrt's parameter, "" if pbrt has none
+  const char*            pbrt_alias    = "";  // pbrt-v4's other name for it
+  const char*            unit          = "";  // printed after the value by `info`
+  const char*            doc           = "";  // one line, for `yscene hair --help`
+};
+
+// Every hair material parameter, in the order json files list them. Json
+// load and save, pbrt import, `yscene hair` options, `yscene info` (text and
+// --json), validate_scene and fingerprint_scene all read this table: a new
+// parameter is a new field of hair_material and one row here (a compile-time
+// check in yocto_scene.cpp holds each default_value to hair_material{}'s).
+// Rules between keys stay with their users: pbrt's precedence (sigma_a, then
+// color, then melanin; one pigment given makes the other 0) in the loaders.
+// clang-format off
+inline constexpr hair_parameter hair_parameters[] = {
+    // name, kind, group, min, max, min_open, max_open, default_value, number, rgb, has,
+    // alias, pbrt, pbrt_alias, unit, doc
+    {"sigma_a", hair_parameter_kind::rgb, hair_parameter_group::pigment, 0, flt_max, false,
+        false, vec3f{0}, nullptr, &hair_material::sigma_a, &hair_material::has_sigma_a,
+        "sigmaA", "sigma_a", "", "",
+        "absorption per unit radius r g b (if given, overrides color and melanin)"},
+    {"color", hair_parameter_kind::rgb, hair_parameter_group::pigment, 0, 1, false, false,
+        vec3f{0}, nullptr, &hair_material::color, &hair_material::has_color, "", "color",
+        "reflectance", "",
+        "colour r g b after multiple scattering (if given, overrides melanin)"},
+    {"eumelanin", hair_parameter_kind::number, hair_parameter_group::pigment, 0, flt_max,
+        false, false, vec3f{1.3f}, &hair_material::eumelanin, nullptr, nullptr, "",
+        "eumelanin", "", "", "eumelanin concentration (brown-black pigment)"},
+    {"pheomelanin", hair_parameter_kind::number, hair_parameter_group::pigment, 0, flt_max,
+        false, false, vec3f{0}, &hair_material::pheomelanin, nullptr, nullptr, "",
+        "pheomelanin", "", "", "pheomelanin concentration (red-yellow pigment)"},
+    {"beta_m", hair_parameter_kind::number, hair_parameter_group::fiber, 0, 1, false, false,
+        vec3f{0.3f}, &hair_material::beta_m, nullptr, nullptr, "betaM", "beta_m", "", "",
+        "longitudinal roughness"},
+    {"beta_n", hair_parameter_kind::number, hair_parameter_group::fiber, 0, 1, false, false,
+        vec3f{0.3f}, &hair_material::beta_n, nullptr, nullptr, "betaN", "beta_n", "", "",
+        "azimuthal roughness"},
+    {"alpha", hair_parameter_kind::number, hair_parameter_group::fiber, -90, 90, false,
+        false, vec3f{2}, &hair_material::alpha, nullptr, nullptr, "", "alpha", "", "deg",
+        "scale tilt in degrees"},
+    {"eta", hair_parameter_kind::number, hair_parameter_group::fiber, 1, 10, false, false,
+        vec3f{1.55f}, &hair_material::eta, nullptr, nullptr, "", "eta", "", "",
+        "index of refraction of the fiber"},
+    {"random_melanin", hair_parameter_kind::number, hair_parameter_group::variation, 0, 1,
+        false, false, vec3f{0}, &hair_material::random_melanin, nullptr, nullptr, "", "", "",
+        "", "per strand spread of the pigment: times 1 + (2 r - 1) random_melanin"},
+    {"random_roughness", hair_parameter_kind::number, hair_parameter_group::variation, 0, 1,
+        false, false, vec3f{0}, &hair_material::random_roughness, nullptr, nullptr, "", "",
+        "", "", "per strand spread of beta_m and beta_n: times 1 + (2 r - 1) random_roughness"},
+    {"tip_eumelanin", hair_parameter_kind::number, hair_parameter_group::variation, 0,
+        flt_max, false, false, vec3f{0}, &hair_material::tip_eumelanin, nullptr,
+        &hair_material::has_tip_eumelanin, "", "", "", "",
+        "eumelanin at the tip (absent: the root's)"},
+    {"tip_pheomelanin", hair_parameter_kind::number, hair_parameter_group::variation, 0,
+        flt_max, false, false, vec3f{0}, &hair_material::tip_pheomelanin, nullptr,
+        &hair_material::has_tip_pheomelanin, "", "", "", "",
+        "pheomelanin at the tip (absent: the root's)"},
+    {"tip_color", hair_parameter_kind::rgb, hair_parameter_group::variation, 0, 1, false,
+        false, vec3f{0}, nullptr, &hair_material::tip_color, &hair_material::has_tip_color,
+        "", "", "", "", "colour r g b at the tip (absent: the root's)"},
+    {"tip_sigma_a", hair_parameter_kind::rgb, hair_parameter_group::variation, 0, flt_max,
+        false, false, vec3f{0}, nullptr, &hair_material::tip_sigma_a,
+        &hair_material::has_tip_sigma_a, "", "", "", "",
+        "absorption r g b at the tip (absent: the root's)"},
+    {"tip_start", hair_parameter_kind::number, hair_parameter_group::variation, 0, 1, false,
+        true, vec3f{0}, &hair_material::tip_start, nullptr, nullptr, "", "", "", "",
+        "where along the strand (0 root, 1 tip) the blend to the tip values starts"},
+    {"tint", hair_parameter_kind::rgb, hair_parameter_group::variation, 0, 1, false, false,
+        vec3f{1}, nullptr, &hair_material::tint, nullptr, "", "", "", "",
+        "dye colour r g b, its absorption added to the pigment's (white: none)"},
+};
+// clang-format on
+
+// The row whose name or alias is `key`, nullptr if none.
+const hair_parameter* find_hair_parameter(const std::string& key);
+
+// A parameter's value in a material (a number in every component).
+vec3f get_hair_parameter(const hair_material& material, const hair_parameter& parameter);
+// Sets a parameter's value (a number from the x component) and its has_ flag.
+void set_hair_parameter(
+    hair_material& material, const hair_parameter& parameter, const vec3f& value);
+
+// Whether a material gives the parameter: its has_ flag if it has one, else
+// a value other than the default.
+bool is_hair_parameter_set(const hair_material& material, const hair_parameter& parameter);
+
+// Whether every component lies in the parameter's range (false for NaN).
+bool is_hair_parameter_valid(const hair_parameter& parameter, const vec3f& value);
+// The range as text: "in [0, 1]", "in [0, 1)", ">= 0", "> 0".
+std::string format_hair_parameter_range(const hair_parameter& parameter);
+
+// Checks every parameter a hair material uses (optional ones only if given)
+// against its range; false with "NAME VALUE is not RANGE" otherwise.
+bool check_hair_material(const hair_material& material, std::string& error);
 
 }  // namespace yocto
 
@@ -229,6 +359,28 @@ struct fiber_point {
 fiber_point eval_fiber_point(const scene_data& scene, const instance_data& instance,
     int element, float u, const ray3f& ray, float distance);
 
+// The strands of a fibre shape (lines or curves): which segments form each
+// strand, root first, from connectivity (a segment continues the one whose
+// end is its start: the same vertex, or a vertex at the same position), so
+// that files that do not list strands (PLY, pbrt, generated grooms) have
+// them, and those that do (Cem Yuksel's .hair, whose strands the loader
+// writes as chains of segments) keep theirs. A segment no other one ends at
+// starts a strand; a closed loop starts at its lowest segment.
+struct fiber_strands {
+  std::vector<int>   strand   = {};  // per segment: its strand
+  std::vector<vec2f> u        = {};  // per segment: place along the strand at its start
+                                     // and end, by chord length (0 root, 1 tip)
+  std::vector<vec2f> random   = {};  // per strand: two values in [0, 1) of its root
+  std::vector<int>   starts   = {};  // strand k: segments[starts[k] ... starts[k + 1] - 1]
+  std::vector<int>   segments = {};  // segment indices strand by strand, root first
+};
+fiber_strands make_fiber_strands(const shape_data& shape);
+
+// Two uniform values in [0, 1) that depend on a strand's root position
+// alone (its three floats' bits, -0 as 0), so that reordering the strands of
+// a file, or splitting a groom into files, changes no strand's values.
+vec2f strand_random(const vec3f& root);
+
 // A ray leaving a fiber at `axis` (with its tangent and radius there): it
 // starts on the circle of 1.01 radius around the axis, on the side that
 // `direction` heads to (`side` when it runs along the fiber), so that it
@@ -245,9 +397,10 @@ shape_data make_quad_shape(const vec2f& size);
 // Appends a strand through the points to a curves shape: a uniform
 // Catmull-Rom spline (one-sided tangents at the ends) as n - 1 chained cubic
 // Bezier segments, 3 (n - 1) + 1 vertices, the radius interpolated linearly
-// between the points' radii. Fewer than 2 points append nothing.
+// between the points' radii (and colours, if given: one per point, appended
+// to shape.colors). Fewer than 2 points append nothing.
 void append_catmull_rom_strand(shape_data& shape, const std::vector<vec3f>& points,
-    const std::vector<float>& radii);
+    const std::vector<float>& radii, const std::vector<vec3f>& colors = {});
 
 // The largest coordinate a scene may hold, in world space. Embree asserts on
 // a ray whose origin or direction has a component beyond 1.844e18 (its
@@ -260,8 +413,9 @@ inline constexpr float max_scene_coordinate = 1e15f;
 // the ray tracer: camera rays (corner, edge and centre pixels through the
 // centre and rim of the lens) must start within max_scene_coordinate along a
 // finite unit direction; vertex positions, radii and instanced bounds must lie
-// within it; distant light directions must normalize. Returns false with a
-// message naming the element.
+// within it; distant light directions must normalize; hair materials'
+// parameters must lie in their ranges (check_hair_material). Returns false
+// with a message naming the element.
 bool validate_scene(const scene_data& scene, std::string& error);
 
 // Adds a default camera framing the scene bounds if the scene has none.

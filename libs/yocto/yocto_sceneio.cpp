@@ -678,7 +678,7 @@ static bool parse_ply_header(const std::string& filename, ply_cursor& cursor,
 }
 
 // Vertex properties we keep, each read into its own column.
-enum struct ply_column { x, y, z, nx, ny, nz, u, v, radius };
+enum struct ply_column { x, y, z, nx, ny, nz, u, v, radius, red, green, blue };
 
 static int ply_vertex_column(const std::string& name) {
   static const auto names = std::unordered_map<std::string, ply_column>{
@@ -687,7 +687,8 @@ static int ply_vertex_column(const std::string& name) {
       {"u", ply_column::u}, {"s", ply_column::u}, {"texture_u", ply_column::u},
       {"texture_s", ply_column::u}, {"v", ply_column::v}, {"t", ply_column::v},
       {"texture_v", ply_column::v}, {"texture_t", ply_column::v},
-      {"radius", ply_column::radius}};
+      {"radius", ply_column::radius}, {"red", ply_column::red},
+      {"green", ply_column::green}, {"blue", ply_column::blue}};
   auto found = names.find(name);
   return found == names.end() ? -1 : (int)found->second;
 }
@@ -833,16 +834,20 @@ static bool load_ply_shape(
       // A normal or texcoord group is all there or not at all: half a
       // normal has no meaning.
       for (auto group : {std::vector{ply_column::nx, ply_column::ny, ply_column::nz},
-               std::vector{ply_column::u, ply_column::v}}) {
+               std::vector{ply_column::u, ply_column::v},
+               std::vector{ply_column::red, ply_column::green, ply_column::blue}}) {
         auto present = 0;
         for (auto c : group) present += has(c) ? 1 : 0;
         if (present == 0 || present == (int)group.size()) continue;
         for (auto p = 0; p < (int)columns.size(); p++) {
           if (std::find(group.begin(), group.end(), (ply_column)columns[p]) == group.end())
             continue;
+          auto colors = group[0] == ply_column::red;
           error = filename + ": element vertex property " + element.properties[p].name +
-                  ": incomplete " + (group.size() == 3 ? "normal" : "texcoord") +
-                  " (" + (group.size() == 3 ? "nx ny nz" : "u v") + " needed)";
+                  ": incomplete " +
+                  (colors ? "color" : group.size() == 3 ? "normal" : "texcoord") + " (" +
+                  (colors ? "red green blue" : group.size() == 3 ? "nx ny nz" : "u v") +
+                  " needed)";
           return false;
         }
       }
@@ -853,8 +858,11 @@ static bool load_ply_shape(
       if (has(ply_column::nx)) shape.normals.resize(max_rows);
       if (has(ply_column::u)) shape.texcoords.resize(max_rows);
       if (has(ply_column::radius)) shape.radius.resize(max_rows);
+      if (has(ply_column::red)) shape.colors.resize(max_rows);
       auto targets = std::vector<float*>(columns.size(), nullptr);
       auto strides = std::vector<size_t>(columns.size(), 0);
+      // Colours stored as integers are in [0, 255] (the PLY habit), floats in [0, 1].
+      auto scales  = std::vector<double>(columns.size(), 1.0);
       auto in      = [](int c, ply_column first, ply_column last) {
         return c >= (int)first && c <= (int)last;
       };
@@ -870,10 +878,16 @@ static bool load_ply_shape(
           targets[p] = (float*)shape.texcoords.data() + (c - (int)ply_column::u), strides[p] = 2;
         } else if (c == (int)ply_column::radius) {
           targets[p] = shape.radius.data(), strides[p] = 1;
+        } else if (in(c, ply_column::red, ply_column::blue)) {
+          targets[p] = (float*)shape.colors.data() + (c - (int)ply_column::red), strides[p] = 3;
+          auto type  = element.properties[p].type;
+          if (type == ply_type::u8) scales[p] = 1.0 / 255;
+          if (type == ply_type::u16) scales[p] = 1.0 / 65535;
         }
       }
       auto on_scalar = [&](int p, size_t row, double value) {
-        if (targets[p] && row < max_rows) targets[p][row * strides[p]] = (float)value;
+        if (targets[p] && row < max_rows)
+          targets[p][row * strides[p]] = (float)(value * scales[p]);
       };
       auto on_list = [](int, size_t, const std::vector<double>&) { return true; };
       if (!read_ply_rows(filename, cursor, element, on_scalar, on_list, error)) return false;
@@ -951,7 +965,8 @@ static bool load_ply_shape(
   };
   if (!check_finite((const float*)shape.positions.data(), shape.positions.size(), 3) ||
       !check_finite((const float*)shape.normals.data(), shape.normals.size(), 3) ||
-      !check_finite((const float*)shape.texcoords.data(), shape.texcoords.size(), 2))
+      !check_finite((const float*)shape.texcoords.data(), shape.texcoords.size(), 2) ||
+      !check_finite((const float*)shape.colors.data(), shape.colors.size(), 3))
     return false;
   for (size_t i = 0; i < shape.radius.size(); i++) {
     if (!std::isfinite(shape.radius[i]) || shape.radius[i] < 0) {
@@ -991,7 +1006,8 @@ static bool encode_shape(const std::string& filename, const shape_data& shape,
   };
   if (!check_size(shape.normals.size(), "normals") ||
       !check_size(shape.texcoords.size(), "texcoords") ||
-      !check_size(shape.radius.size(), "radius"))
+      !check_size(shape.radius.size(), "radius") ||
+      !check_size(shape.colors.size(), "colors"))
     return false;
   auto kinds = (int)!shape.triangles.empty() + (int)!shape.lines.empty() +
                (int)!shape.curves.empty();
@@ -1025,6 +1041,7 @@ static bool encode_shape(const std::string& filename, const shape_data& shape,
   if (!shape.normals.empty()) data += "property float nx\nproperty float ny\nproperty float nz\n";
   if (!shape.texcoords.empty()) data += "property float u\nproperty float v\n";
   if (!shape.radius.empty()) data += "property float radius\n";
+  if (!shape.colors.empty()) data += "property float red\nproperty float green\nproperty float blue\n";
   if (num_elements > 0) {
     data += "element " + element_name + " " + std::to_string(num_elements) + "\n";
     data += "property list uchar int vertex_indices\n";
@@ -1041,6 +1058,8 @@ static bool encode_shape(const std::string& filename, const shape_data& shape,
     if (!shape.texcoords.empty())
       row.insert(row.end(), {shape.texcoords[i].x, shape.texcoords[i].y});
     if (!shape.radius.empty()) row.push_back(shape.radius[i]);
+    if (!shape.colors.empty())
+      row.insert(row.end(), {shape.colors[i].x, shape.colors[i].y, shape.colors[i].z});
   };
   if (ascii) {
     for (size_t i = 0; i < num_vertices; i++) {
@@ -1059,7 +1078,8 @@ static bool encode_shape(const std::string& filename, const shape_data& shape,
     }
   } else {
     auto row_size = 3 + (shape.normals.empty() ? 0 : 3) +
-                    (shape.texcoords.empty() ? 0 : 2) + (shape.radius.empty() ? 0 : 1);
+                    (shape.texcoords.empty() ? 0 : 2) + (shape.radius.empty() ? 0 : 1) +
+                    (shape.colors.empty() ? 0 : 3);
     data.reserve(data.size() + num_vertices * row_size * 4 +
                  num_elements * (1 + 4 * element_size));
     for (size_t i = 0; i < num_vertices; i++) {
@@ -1616,12 +1636,11 @@ using json = nlohmann::ordered_json;
 // What a material element said, kept until instances tell which materials
 // dress fibers: that decides the type of a material without one.
 struct json_material_info {
-  bool                     has_type        = false;
-  bool                     has_hair_keys   = false;
-  bool                     has_eumelanin   = false;
-  bool                     has_pheomelanin = false;
-  bool                     has_color       = false;
-  std::vector<std::string> keys            = {};
+  bool                     has_type      = false;
+  bool                     has_hair_keys = false;
+  bool                     has_color     = false;
+  std::vector<std::string> keys          = {};
+  std::vector<std::string> hair_given    = {};  // hair parameters given, by name
 };
 
 // Everything load_scene needs besides the scene: where files are, what the
@@ -1936,8 +1955,30 @@ static bool parse_material_type(json_loader& loader, const json& value,
                                "\" (expected matte, glossy or hair)");
 }
 
-static const auto hair_keys = std::unordered_set<std::string>{"sigma_a", "sigmaA",
-    "eumelanin", "pheomelanin", "beta_m", "betaM", "beta_n", "betaN", "alpha", "eta"};
+// A hair parameter's value, checked against its range in hair_parameters.
+static bool read_hair_parameter(json_loader& loader, const json& value,
+    const std::string& where, const hair_parameter& parameter, vec3f& result) {
+  auto count = parameter.kind == hair_parameter_kind::number ? 1 : 3;
+  if (count == 1 && !value.is_number())
+    return json_fail(loader, where + ": expected a number, got " + json_describe(value));
+  if (count == 3 && (!value.is_array() || value.size() != 3))
+    return json_fail(loader, where + ": expected an array of 3 numbers, got " +
+                                 json_describe(value));
+  for (auto c = 0; c < count; c++) {
+    auto& number = count == 1 ? value : value[c];
+    if (!number.is_number())
+      return json_fail(loader, where + ": expected a number, got " + json_describe(number));
+    result[c] = (float)number.get<double>();
+    if (!std::isfinite(result[c]))
+      return json_fail(loader, where + ": " + number.dump() + " is not a finite float");
+    if (!is_hair_parameter_valid(parameter, vec3f{result[c]}))
+      return json_fail(loader, where + ": expected " + (count == 1 ? "a number " : "numbers ") +
+                                   format_hair_parameter_range(parameter) + ", got " +
+                                   format_float(result[c]));
+  }
+  if (count == 1) result = vec3f{result.x};
+  return true;
+}
 
 static bool parse_material(json_loader& loader, scene_data& scene, const json& element,
     const std::string& label, material_data& material, json_material_info& info) {
@@ -1947,8 +1988,15 @@ static bool parse_material(json_loader& loader, scene_data& scene, const json& e
     auto ok    = true;
     if (key == "name") continue;
     info.keys.push_back(key);
-    info.has_hair_keys |= hair_keys.count(key) != 0;
-    if (key == "type") {
+    // "color" is every type's: it goes to the hair in finish_material.
+    auto parameter = key != "color" ? find_hair_parameter(key) : nullptr;
+    info.has_hair_keys |= parameter != nullptr;
+    if (parameter) {
+      auto number = vec3f{0, 0, 0};
+      ok = read_hair_parameter(loader, value, where, *parameter, number);
+      if (ok) set_hair_parameter(hair, *parameter, number);
+      info.hair_given.push_back(parameter->name);
+    } else if (key == "type") {
       ok = info.has_type = parse_material_type(loader, value, where, material.type);
     } else if (key == "emission") {
       ok = read_vec3(loader, value, where, material.emission, 0);
@@ -1964,20 +2012,6 @@ static bool parse_material(json_loader& loader, scene_data& scene, const json& e
     } else if (key == "color_tex") {
       ok = read_reference(
           loader, scene, value, where, label, json_reference::texture, material.color_tex);
-    } else if (key == "sigma_a" || key == "sigmaA") {
-      ok = hair.has_sigma_a = read_vec3(loader, value, where, hair.sigma_a, 0);
-    } else if (key == "eumelanin") {
-      ok = info.has_eumelanin = read_number(loader, value, where, hair.eumelanin, 0);
-    } else if (key == "pheomelanin") {
-      ok = info.has_pheomelanin = read_number(loader, value, where, hair.pheomelanin, 0);
-    } else if (key == "beta_m" || key == "betaM") {
-      ok = read_number(loader, value, where, hair.beta_m, 0, 1);
-    } else if (key == "beta_n" || key == "betaN") {
-      ok = read_number(loader, value, where, hair.beta_n, 0, 1);
-    } else if (key == "alpha") {
-      ok = read_number(loader, value, where, hair.alpha, -90, 90);
-    } else if (key == "eta") {
-      ok = read_number(loader, value, where, hair.eta, 0, flt_max, true);
     } else {
       info.keys.pop_back();
       warn_unknown_key(loader, label, key);
@@ -1998,7 +2032,7 @@ static bool finish_material(json_loader& loader, const std::string& label,
       case material_type::matte: return key == "color_tex";
       case material_type::glossy:
         return key == "color_tex" || key == "roughness" || key == "ior";
-      case material_type::hair: return hair_keys.count(key) != 0;
+      case material_type::hair: return find_hair_parameter(key) != nullptr;
     }
     return false;
   };
@@ -2011,15 +2045,21 @@ static bool finish_material(json_loader& loader, const std::string& label,
   auto defaults = material_data{};
   if (material.type == material_type::hair) {
     if (info.has_color) {
-      if (max_component(material.color) > 1)
-        return json_fail(loader, json_key(label, "color") +
-                                     ": a hair colour must be in [0, 1]");
-      material.hair.color     = material.color;
-      material.hair.has_color = true;
+      auto& color = *find_hair_parameter("color");
+      for (auto c = 0; c < 3; c++)
+        if (!is_hair_parameter_valid(color, vec3f{material.color[c]}))
+          return json_fail(loader, json_key(label, "color") + ": a hair colour must be " +
+                                       format_hair_parameter_range(color) + ", got " +
+                                       format_float(material.color[c]));
+      set_hair_parameter(material.hair, color, material.color);
     }
     // pbrt's rule: one pigment given means the other is 0.
-    if (info.has_pheomelanin && !info.has_eumelanin) material.hair.eumelanin = 0;
-    if (info.has_eumelanin && !info.has_pheomelanin) material.hair.pheomelanin = 0;
+    auto given = [&](const std::string& name) {
+      return std::find(info.hair_given.begin(), info.hair_given.end(), name) !=
+             info.hair_given.end();
+    };
+    if (given("pheomelanin") && !given("eumelanin")) material.hair.eumelanin = 0;
+    if (given("eumelanin") && !given("pheomelanin")) material.hair.pheomelanin = 0;
     material.color     = defaults.color;
     material.color_tex = defaults.color_tex;
     material.roughness = defaults.roughness;
@@ -2531,15 +2571,18 @@ static json make_scene_json(const scene_data& scene,
     element["emission"] = json_vec3(material.emission);
     if (material.emission_tex >= 0) element["emission_tex"] = material.emission_tex;
     if (material.type == material_type::hair) {
-      auto& hair = material.hair;
-      if (hair.has_sigma_a) element["sigma_a"] = json_vec3(hair.sigma_a);
-      if (hair.has_color) element["color"] = json_vec3(hair.color);
-      element["eumelanin"]   = json_number(hair.eumelanin);
-      element["pheomelanin"] = json_number(hair.pheomelanin);
-      element["beta_m"]      = json_number(hair.beta_m);
-      element["beta_n"]      = json_number(hair.beta_n);
-      element["alpha"]       = json_number(hair.alpha);
-      element["eta"]         = json_number(hair.eta);
+      // Optional keys when given, variation keys away from their defaults
+      // (files without variation stay as they were), the others always.
+      for (auto& parameter : hair_parameters) {
+        auto write = parameter.has || parameter.group == hair_parameter_group::variation
+                         ? is_hair_parameter_set(material.hair, parameter)
+                         : true;
+        if (!write) continue;
+        auto value = get_hair_parameter(material.hair, parameter);
+        element[parameter.name] = parameter.kind == hair_parameter_kind::number
+                                      ? json(json_number(value.x))
+                                      : json_vec3(value);
+      }
     } else {
       element["color"] = json_vec3(material.color);
       if (material.color_tex >= 0) element["color_tex"] = material.color_tex;

@@ -38,15 +38,14 @@ namespace yocto {
 // Material types: matte, glossy, hair; other Yocto types map to the nearest
 // with a warning (plastic, metal, reflective, gltfpbr -> glossy; transparent,
 // refractive, glass, subsurface, volumetric -> matte); anything else is an
-// error. A material without `type` is hair if it has a hair key (sigma_a,
-// eumelanin, pheomelanin, beta_m, beta_n, alpha, eta or an alias) or if the
-// instances that use it all have fiber (lines or curves) shapes; otherwise
-// matte. Hair keys: sigma_a, color (into hair.color), eumelanin, pheomelanin,
-// beta_m, beta_n (both in [0, 1]), alpha (degrees), eta (> 0); aliases
-// sigmaA, betaM, betaN. has_sigma_a/has_color are set when given; one
-// pigment given makes the other 0. Keys a type does not use are dropped with
-// a warning (e.g. roughness on hair), so a loaded material holds defaults in
-// the fields its type ignores. Bad values, wrong types, out-of-range
+// error. A material without `type` is hair if it has a hair key (a name or
+// alias of hair_parameters other than color) or if the instances that use it
+// all have fiber (lines or curves) shapes; otherwise matte. Hair keys are the
+// rows of hair_parameters (yocto_scene.h: names, aliases such as betaM,
+// ranges, defaults), color going into hair.color; a key's has_ flag is set
+// when it is given; one pigment given makes the other 0. Keys a type does
+// not use are dropped with a warning (e.g. roughness on hair), so a loaded
+// material holds defaults in the fields its type ignores. Bad values, wrong types, out-of-range
 // references, missing files and hair on a triangle mesh are errors.
 // Each file is loaded once: shape (texture) elements that name the same file,
 // the path resolved, become one shape (texture) that their users share, named
@@ -58,8 +57,9 @@ bool load_scene(const std::string& filename, scene_data& scene, std::string& err
 // Saves a json scene (4.2 layout) with shapes as PLY files under shapes/ and
 // textures as float EXR under textures/, next to the json, named after the
 // elements (made safe and unique). Each material writes the keys its type
-// uses, so load_scene(save_scene(scene)) gives back every field that has a
-// meaning. The scene is validated first; on failure the files this call
+// uses (hair: optional keys when given, variation keys when away from their
+// defaults, the others always), so load_scene(save_scene(scene)) gives back
+// every field that has a meaning. The scene is validated first; on failure the files this call
 // created are removed.
 bool save_scene(const std::string& filename, const scene_data& scene,
     std::string& error, bool ascii_shapes = false);

@@ -10,143 +10,6 @@
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
 
-#include <yocto_hair/yocto_hair.h>
-
-// -----------------------------------------------------------------------------
-// MATERIALS
-// -----------------------------------------------------------------------------
-namespace yocto {
-
-// What shading needs at a hit.
-struct trace_point {
-  vec3f          position = {0, 0, 0};
-  vec3f          normal   = {0, 0, 1};  // shading normal, facing the outgoing side
-  vec3f          gnormal  = {0, 0, 1};  // triangles: geometric normal (area-light pdfs)
-  vec3f          emission = {0, 0, 0};
-  vec3f          color    = {0, 0, 0};
-  float          roughness = 0;
-  float          ior       = 1.5f;
-  material_type  type      = material_type::matte;
-  bool           fiber     = false;
-  vec3f          axis      = {0, 0, 0};  // fibers: point on the axis
-  float          radius    = 0;          // fibers: radius at the hit
-  vec3f          tangent   = {1, 0, 0};  // fibers
-  hair_brdf      hair      = {};
-};
-
-// A black matte surface absorbs everything: the path ends there.
-static bool scatters_nothing(const trace_point& point) {
-  return point.type == material_type::matte && point.color == vec3f{0, 0, 0};
-}
-
-// Fresnel reflectance of a dielectric interface (unpolarised).
-static float fresnel_dielectric(float eta, float cos_w) {
-  cos_w       = std::abs(cos_w);
-  auto sin2_t = (1 - cos_w * cos_w) / (eta * eta);
-  if (sin2_t >= 1) return 1;
-  auto cos_t = safe_sqrt(1 - sin2_t);
-  auto rs    = (cos_w - eta * cos_t) / (cos_w + eta * cos_t);
-  auto rp    = (eta * cos_w - cos_t) / (eta * cos_w + cos_t);
-  return (rs * rs + rp * rp) / 2;
-}
-
-// GGX distribution and Smith masking (Walter et al., Microfacet Models for
-// Refraction through Rough Surfaces, EGSR 2007), alpha = roughness^2.
-static float ggx_distribution(float alpha, float cos_h) {
-  if (cos_h <= 0) return 0;
-  auto a2 = alpha * alpha, c2 = cos_h * cos_h;
-  return a2 / (pif * sqr(c2 * (a2 - 1) + 1));
-}
-static float ggx_smith_g1(float alpha, float cos_w) {
-  auto c2 = cos_w * cos_w;
-  return 2 / (1 + std::sqrt(1 + alpha * alpha * (1 - c2) / std::max(c2, 1e-12f)));
-}
-static float glossy_alpha(float roughness) { return std::max(sqr(roughness), 1e-3f); }
-
-static vec3f eval_bsdfcos(const trace_point& point, const vec3f& outgoing, const vec3f& incoming) {
-  if (point.type == material_type::hair) {
-    return eval_hair_scattering(point.hair, outgoing, incoming);
-  }
-  auto cos_i = dot(point.normal, incoming), cos_o = dot(point.normal, outgoing);
-  if (cos_i <= 0 || cos_o <= 0) return {0, 0, 0};
-  if (point.type == material_type::matte) return point.color / pif * cos_i;
-  // glossy: GGX coat over a Lambertian base
-  auto alpha   = glossy_alpha(point.roughness);
-  auto half    = normalize(incoming + outgoing);
-  auto fresnel = fresnel_dielectric(point.ior, dot(half, outgoing));
-  auto base    = 1 - fresnel_dielectric(point.ior, cos_o);
-  auto specular = fresnel * ggx_distribution(alpha, dot(point.normal, half)) *
-                  ggx_smith_g1(alpha, cos_o) * ggx_smith_g1(alpha, cos_i) / (4 * cos_o);
-  return point.color / pif * base * cos_i + vec3f{specular, specular, specular};
-}
-
-static float sample_bsdfcos_pdf(
-    const trace_point& point, const vec3f& outgoing, const vec3f& incoming) {
-  if (point.type == material_type::hair) {
-    return sample_hair_scattering_pdf(point.hair, outgoing, incoming);
-  }
-  auto cos_i = dot(point.normal, incoming), cos_o = dot(point.normal, outgoing);
-  if (cos_i <= 0 || cos_o <= 0) return 0;
-  if (point.type == material_type::matte) return cos_i / pif;
-  auto alpha     = glossy_alpha(point.roughness);
-  auto half      = normalize(incoming + outgoing);
-  auto specular  = fresnel_dielectric(point.ior, cos_o);
-  auto pdf_half  = ggx_distribution(alpha, dot(point.normal, half)) * dot(point.normal, half);
-  return specular * pdf_half / (4 * std::abs(dot(outgoing, half))) +
-         (1 - specular) * cos_i / pif;
-}
-
-// eval_bsdfcos and sample_bsdfcos_pdf together, for MIS; hair computes the
-// lobe products they share once.
-static std::pair<vec3f, float> eval_bsdfcos_and_pdf(
-    const trace_point& point, const vec3f& outgoing, const vec3f& incoming) {
-  if (point.type == material_type::hair) {
-    return eval_hair_scattering_and_pdf(point.hair, outgoing, incoming);
-  }
-  return {eval_bsdfcos(point, outgoing, incoming),
-      sample_bsdfcos_pdf(point, outgoing, incoming)};
-}
-
-// Whether eval_bsdfcos can be non-zero for this pair: surfaces scatter only
-// into the hemisphere of the outgoing direction; fibers everywhere.
-static bool may_scatter(const trace_point& point, const vec3f& outgoing, const vec3f& incoming) {
-  return point.type == material_type::hair ||
-         (dot(point.normal, incoming) > 0 && dot(point.normal, outgoing) > 0);
-}
-
-// Directional albedo for the AOV: hair the model's own (sum of A_p), matte
-// its colour, glossy the Lambertian base under the coat plus the coat's
-// Fresnel reflectance at the outgoing angle (GGX's own losses left out).
-static vec3f eval_albedo(const trace_point& point, const vec3f& outgoing) {
-  if (point.type == material_type::hair) return eval_hair_albedo(point.hair, outgoing);
-  if (point.type == material_type::matte) return point.color;
-  auto fresnel = fresnel_dielectric(point.ior, dot(point.normal, outgoing));
-  return point.color * (1 - fresnel) + vec3f{fresnel, fresnel, fresnel};
-}
-
-// `more` is used by hair with params.hair_four_numbers only (empty otherwise).
-static vec3f sample_bsdfcos(const trace_point& point, const vec3f& outgoing, float rnl,
-    const vec2f& rn, const vec2f& more, const trace_params& params) {
-  if (point.type == material_type::hair) {
-    if (params.hair_four_numbers) {
-      return sample_hair_scattering(point.hair, outgoing, vec4f{rn.x, rn.y, more.x, more.y});
-    }
-    return sample_hair_scattering(point.hair, outgoing, rn);
-  }
-  if (point.type == material_type::matte) return sample_hemisphere_cos(point.normal, rn);
-  auto specular = fresnel_dielectric(point.ior, dot(point.normal, outgoing));
-  if (rnl >= specular) return sample_hemisphere_cos(point.normal, rn);
-  // GGX half vector: tan^2 theta = alpha^2 u / (1 - u).
-  auto alpha = glossy_alpha(point.roughness);
-  auto phi   = 2 * pif * rn.x;
-  auto tan2  = alpha * alpha * rn.y / std::max(1 - rn.y, 1e-7f);
-  auto cos_h = 1 / std::sqrt(1 + tan2), sin_h = safe_sqrt(1 - cos_h * cos_h);
-  auto local = vec3f{sin_h * std::cos(phi), sin_h * std::sin(phi), cos_h};
-  auto half  = normalize(basis_fromz(point.normal) * local);
-  return reflect(outgoing, half);
-}
-
-}  // namespace yocto
 
 // -----------------------------------------------------------------------------
 // LIGHTS
@@ -154,9 +17,8 @@ static vec3f sample_bsdfcos(const trace_point& point, const vec3f& outgoing, flo
 namespace yocto {
 
 trace_context make_trace_context(const scene_data& scene, const trace_params& params) {
-  auto context = trace_context{};
-  for (auto& material : scene.materials)
-    context.hair.push_back(make_hair_precomputed(material.hair));
+  auto context    = trace_context{};
+  context.shading = make_shading_context(scene, params.hair_sampling);
   context.instance_light.assign(scene.instances.size(), -1);
   context.environment_light.assign(scene.environments.size(), -1);
   for (auto& environment : scene.environments)
@@ -326,62 +188,6 @@ static vec3f eval_environments(const scene_data& scene, const trace_context& con
   return radiance;
 }
 
-static trace_point eval_trace_point(const scene_data& scene, const trace_context& context,
-    const scene_intersection& intersection, const ray3f& ray, const trace_params& params) {
-  auto& instance = scene.instances[intersection.instance];
-  auto& material = scene.materials[instance.material];
-  auto& shape    = scene.shapes[instance.shape];
-  auto  point    = trace_point{};
-  point.type      = material.type;
-  point.color     = material.color;
-  point.roughness = material.roughness;
-  point.ior       = material.ior;
-  point.emission  = material.emission;
-  auto texcoord   = vec2f{0, 0};
-  if (!shape.triangles.empty()) {
-    auto surface   = eval_surface_point(scene, instance, intersection.element, intersection.uv);
-    point.position = surface.position;
-    texcoord       = surface.texcoord;
-    // Emission only from the front face; shading from either side.
-    if (dot(surface.gnormal, -ray.d) < 0) point.emission = {0, 0, 0};
-    point.normal  = dot(surface.normal, -ray.d) >= 0 ? surface.normal : -surface.normal;
-    point.gnormal = surface.gnormal;
-  } else {
-    auto fiber = eval_fiber_point(scene, instance, intersection.element, intersection.uv.x,
-        ray, intersection.distance);
-    point.fiber    = true;
-    point.position = fiber.position;
-    point.axis     = fiber.axis;
-    point.radius   = fiber.radius;
-    point.tangent  = fiber.tangent;
-    point.normal   = fiber.normal;
-    if (material.type == material_type::hair) {
-      // With the outgoing direction, so that the terms depending on it are
-      // computed once for the three or four hair calls of this hit.
-      point.hair = eval_hair_brdf(params.hair_per_hit
-                                      ? make_hair_precomputed(material.hair, params.hair_fast_pow)
-                                      : context.hair[instance.material],
-          fiber.h, fiber.frame, -ray.d);
-    }
-  }
-  if (material.color_tex >= 0)
-    point.color *= eval_texture(scene.textures[material.color_tex], texcoord);
-  if (material.emission_tex >= 0)
-    point.emission *= eval_texture(scene.textures[material.emission_tex], texcoord);
-  return point;
-}
-
-// A ray leaving a point: fibers by spawn_fiber_ray (yocto_scene), surfaces
-// offset along the normal to the side of the direction.
-static ray3f spawn_ray(const trace_point& point, const vec3f& direction) {
-  if (point.fiber)
-    return spawn_fiber_ray(point.axis, point.tangent, point.radius, point.normal, direction);
-  auto scale  = std::max(1.0f, max_component(abs(point.position)));
-  auto offset = point.normal * (ray_eps * scale);
-  auto o      = point.position + (dot(direction, point.normal) >= 0 ? offset : -offset);
-  return {o, direction, 0, flt_max};
-}
-
 // Solid-angle pdf that light sampling would have produced for a BSDF ray that
 // hit an area light (at distance, with cosine at the light) or escaped.
 static float area_light_pdf(const scene_data& scene, const trace_context& context,
@@ -489,7 +295,7 @@ static scene_intersection cast_closest(const trace_walk& walk, const ray3f& ray)
 // first hair scattering on is also added to the lobe it took there (the
 // light sampled there by each lobe's term, the rest by the sampled lobe or
 // by the lobes' shares of the sampled direction's value): see AOVS.
-static void scatter_path(const trace_walk& walk, trace_point point, ray3f ray, int bounce,
+static void scatter_path(const trace_walk& walk, material_point point, ray3f ray, int bounce,
     vec3f weight, sequence_state& sequence, vec3f& radiance, vec3f* lobes = nullptr) {
   auto& [scene, bvh, context, params, threshold, rays, record, points] = walk;
   auto use_mis = params.sampler == trace_sampler_type::path;
@@ -554,32 +360,23 @@ static void scatter_path(const trace_walk& walk, trace_point point, ray3f ray, i
     // BSDF sampling.
     auto lobe_roulette = sample_sequence2f(sequence, pairs + trace_pair_lobe_roulette);
     auto rn            = sample_sequence2f(sequence, pairs + trace_pair_direction);
-    auto more = params.hair_four_numbers && point.type == material_type::hair
+    auto more = bsdf_takes_more_numbers(point)
                     ? sample_sequence2f(sequence, pairs + trace_pair_direction_more)
                     : vec2f{0, 0};
-    auto incoming = vec3f{0, 0, 0};
-    auto bsdf_pdf = 0.0f;  // 0 when no MIS weight will need it
-    if (point.type == material_type::hair && !samples_lights && !params.hair_four_numbers &&
-        !params.hair_mixture_weight) {
-      // No pdf needed: the sampled lobe's own weight, no evaluation.
-      auto sample = sample_hair_scattering_weight(point.hair, outgoing, rn);
-      incoming    = sample.incoming;
-      if (incoming == vec3f{0, 0, 0} || !isfinite(incoming)) break;
-      if (sample.weight == vec3f{0, 0, 0}) break;
-      weight *= sample.weight;
-      if (first_hair) lobe_shares[sample.lobe] = {1, 1, 1};
-    } else {
-      incoming = sample_bsdfcos(point, outgoing, lobe_roulette.x, rn, more, params);
-      if (incoming == vec3f{0, 0, 0} || !isfinite(incoming)) break;
-      auto [bsdfcos, pdf] = eval_bsdfcos_and_pdf(point, outgoing, incoming);
-      if (!(pdf > 0) || bsdfcos == vec3f{0, 0, 0}) break;
-      weight *= bsdfcos / pdf;
-      bsdf_pdf = pdf;
-      if (first_hair) {
+    // The pdf only where an MIS weight will need it (0 otherwise).
+    auto sample = sample_bsdf(point, outgoing, lobe_roulette.x, rn, more, samples_lights);
+    if (sample.weight == vec3f{0, 0, 0}) break;
+    auto incoming = sample.incoming;
+    auto bsdf_pdf = sample.pdf;
+    weight *= sample.weight;
+    if (first_hair) {
+      if (sample.lobe >= 0) {
+        lobe_shares[sample.lobe] = {1, 1, 1};
+      } else {
         auto terms = eval_hair_scattering_lobes(point.hair, outgoing, incoming);
         for (auto p = 0; p < 4; p++)
           for (auto c = 0; c < 3; c++)
-            lobe_shares[p][c] = bsdfcos[c] > 0 ? terms[p][c] / bsdfcos[c] : 0.0f;
+            lobe_shares[p][c] = sample.bsdfcos[c] > 0 ? terms[p][c] / sample.bsdfcos[c] : 0.0f;
       }
     }
     if (!isfinite(weight)) break;
@@ -607,7 +404,8 @@ static void scatter_path(const trace_walk& walk, trace_point point, ray3f ray, i
       radiance += weight * eval_environments(scene, context, ray.d, use_mis ? bsdf_pdf : 0);
       break;
     }
-    point = eval_trace_point(scene, context, intersection, ray, params);
+    point = eval_material_point(scene, context.shading, intersection.instance, intersection.element,
+        intersection.uv, intersection.distance, ray);
     if (point.emission != vec3f{0, 0, 0}) {
       auto mis = 1.0f;
       if (use_mis && bsdf_pdf > 0) {
@@ -647,7 +445,8 @@ static vec3f trace_path(const trace_walk& walk, const ray3f& camera_ray,
   auto& [scene, bvh, context, params, threshold, rays, record, points] = walk;
   auto intersection = cast_closest(walk, camera_ray);
   if (!intersection.hit) return eval_environments(scene, context, camera_ray.d, 0);
-  auto point    = eval_trace_point(scene, context, intersection, camera_ray, params);
+  auto point    = eval_material_point(scene, context.shading, intersection.instance,
+      intersection.element, intersection.uv, intersection.distance, camera_ray);
   auto radiance = point.emission;  // camera rays take no MIS weight
   auto lobes    = aov ? aov->lobes.data() : nullptr;
   if (aov) {

@@ -32,6 +32,7 @@
 #include "yocto_bvh.h"
 #include "yocto_sampling.h"
 #include "yocto_scene.h"
+#include "yocto_shading.h"
 
 // -----------------------------------------------------------------------------
 // PARAMETERS
@@ -69,12 +70,7 @@ struct trace_params {
   float              clamp      = 0;
   uint64_t           seed       = 961748941;
   int                threads    = 0;     // 0 for all cores
-  bool               hair_four_numbers = false;  // 4 independent numbers, no demux
-  bool               hair_per_hit = false;  // material terms at every hit (as the thesis)
-  bool               hair_fast_pow = false;  // beta^20, beta^22 by squaring, not std::pow
-  // Weigh sampled hair directions by eval / pdf of the lobe mixture even
-  // where no MIS needs the pdf (otherwise the lobe's own A_p / P(p)).
-  bool               hair_mixture_weight = false;
+  hair_sampling_params hair_sampling = {};  // options of the hair BSDF (yocto_shading)
   // Also sum the AOVs of every sample (see AOVS below).
   bool               aovs       = false;
 };
@@ -97,11 +93,11 @@ struct trace_light {
   float              radiance    = 0;  // environments: average radiance (else 0)
 };
 
-// What the tracer precomputes once per scene: the lights to sample and the
-// hair terms that depend on the material alone (one per material).
+// What the tracer precomputes once per scene: the lights to sample and what
+// shading precomputes (make_shading_context).
 struct trace_context {
   std::vector<trace_light>      lights         = {};
-  std::vector<hair_precomputed> hair           = {};
+  shading_context               shading        = {};
   std::vector<int>              instance_light       = {};  // light of an instance, -1 none
   std::vector<int>              environment_light    = {};  // light of an environment, -1 none
   std::vector<frame3f>          environment_inverses = {};  // world to local

@@ -173,6 +173,23 @@ vec3f hair_sigma_a_from_color(const vec3f& color, float beta_n) {
   return sigma_a;
 }
 
+vec3f make_hair_absorption(const hair_material& material) {
+  auto beta_n = std::clamp(material.beta_n, 0.01f, 1.0f);
+  if (!(beta_n == beta_n)) beta_n = 0.3f;
+  // Precedence as pbrt: sigma_a, else colour, else melanin.
+  auto sigma_a = vec3f{0, 0, 0};
+  if (material.has_sigma_a) {
+    sigma_a = glm::max(material.sigma_a, vec3f{0, 0, 0});
+  } else if (material.has_color) {
+    sigma_a = hair_sigma_a_from_color(material.color, beta_n);
+  } else {
+    sigma_a = hair_sigma_a_from_melanin(material.eumelanin, material.pheomelanin);
+  }
+  if (!isfinite(sigma_a)) sigma_a = glm::min(sigma_a, 1e30f);
+  if (!isfinite(sigma_a)) sigma_a = {0, 0, 0};  // NaN input
+  return sigma_a;
+}
+
 hair_precomputed make_hair_precomputed(const hair_material& material, bool fast_pow) {
   auto pre = hair_precomputed{};
   // beta = 0 makes the variance 0 and every term NaN (pbrt-v3 issue #219).
@@ -186,17 +203,7 @@ hair_precomputed make_hair_precomputed(const hair_material& material, bool fast_
   pre.eta = material.eta == material.eta ? std::clamp(material.eta, 1.0f, 1e3f)
                                          : 1.55f;
 
-  // Precedence as pbrt: sigma_a, else colour, else melanin.
-  if (material.has_sigma_a) {
-    pre.sigma_a = glm::max(material.sigma_a, vec3f{0, 0, 0});
-  } else if (material.has_color) {
-    pre.sigma_a = hair_sigma_a_from_color(material.color, beta_n);
-  } else {
-    pre.sigma_a = hair_sigma_a_from_melanin(
-        material.eumelanin, material.pheomelanin);
-  }
-  if (!isfinite(pre.sigma_a)) pre.sigma_a = glm::min(pre.sigma_a, 1e30f);
-  if (!isfinite(pre.sigma_a)) pre.sigma_a = {0, 0, 0};  // NaN input
+  pre.sigma_a = make_hair_absorption(material);
 
   // hair.pdf eq. 4 (Chiang 2016 eq. 7): variance of the R lobe; TT is
   // narrower, TRT and beyond wider.
@@ -231,6 +238,49 @@ hair_precomputed make_hair_precomputed(const hair_material& material, bool fast_
                           sqr(pre.sin_2k_alpha[k - 1]);
   }
   return pre;
+}
+
+bool hair_material_varies(const hair_material& material) {
+  return material.random_melanin != 0 || material.random_roughness != 0 ||
+         material.has_tip_eumelanin || material.has_tip_pheomelanin ||
+         material.has_tip_color || material.has_tip_sigma_a || material.tint != vec3f{1, 1, 1};
+}
+
+hair_material eval_hair_material_point(
+    const hair_material& material, const vec2f& random, float u) {
+  auto point = material;
+  auto blend = material.tip_start < 1
+                   ? std::clamp((u - material.tip_start) / (1 - material.tip_start), 0.0f, 1.0f)
+                   : 0.0f;
+  if (!(blend == blend)) blend = 0;
+  auto beta_n = std::clamp(material.beta_n, 0.01f, 1.0f);
+  if (!(beta_n == beta_n)) beta_n = 0.3f;
+  // The pigment's absorption at u, by the precedence of make_hair_precomputed.
+  auto sigma_a = vec3f{0, 0, 0};
+  if (material.has_sigma_a) {
+    auto tip = material.has_tip_sigma_a ? material.tip_sigma_a : material.sigma_a;
+    sigma_a  = glm::max(material.sigma_a + (tip - material.sigma_a) * blend, vec3f{0, 0, 0});
+  } else if (material.has_color) {
+    auto tip = material.has_tip_color ? material.tip_color : material.color;
+    sigma_a  = hair_sigma_a_from_color(material.color + (tip - material.color) * blend, beta_n);
+  } else {
+    auto eumelanin   = material.has_tip_eumelanin ? material.tip_eumelanin : material.eumelanin;
+    auto pheomelanin = material.has_tip_pheomelanin ? material.tip_pheomelanin
+                                                    : material.pheomelanin;
+    sigma_a = hair_sigma_a_from_melanin(
+        material.eumelanin + (eumelanin - material.eumelanin) * blend,
+        material.pheomelanin + (pheomelanin - material.pheomelanin) * blend);
+  }
+  sigma_a *= std::max(1 + (2 * random.x - 1) * material.random_melanin, 0.0f);
+  if (material.tint != vec3f{1, 1, 1}) sigma_a += hair_sigma_a_from_color(material.tint, beta_n);
+  point.sigma_a     = sigma_a;
+  point.has_sigma_a = true;
+  if (material.random_roughness != 0) {
+    auto scale = std::max(1 + (2 * random.y - 1) * material.random_roughness, 0.0f);
+    point.beta_m = std::clamp(material.beta_m * scale, 0.01f, 1.0f);
+    point.beta_n = std::clamp(material.beta_n * scale, 0.01f, 1.0f);
+  }
+  return point;
 }
 
 hair_brdf eval_hair_brdf(const hair_material& material, float h, const frame3f& frame) {

@@ -46,7 +46,41 @@ struct hair_material {
   float eta         = 1.55f;
   bool  has_sigma_a = false;
   bool  has_color   = false;
+  // Variation across a groom (eval_hair_material_point). The defaults vary
+  // nothing: such a material is the same for every strand and point.
+  float random_melanin   = 0;          // [0, 1]: per strand pigment factor spread
+  float random_roughness = 0;          // [0, 1]: per strand beta_m, beta_n factor spread
+  float tip_eumelanin    = 0;          // used if has_tip_eumelanin
+  float tip_pheomelanin  = 0;          // used if has_tip_pheomelanin
+  vec3f tip_color        = {0, 0, 0};  // used if has_tip_color
+  vec3f tip_sigma_a      = {0, 0, 0};  // used if has_tip_sigma_a
+  float tip_start        = 0;          // [0, 1): where the blend to the tip starts
+  vec3f tint             = {1, 1, 1};  // dye colour; white adds no absorption
+  bool  has_tip_eumelanin   = false;
+  bool  has_tip_pheomelanin = false;
+  bool  has_tip_color       = false;
+  bool  has_tip_sigma_a     = false;
 };
+
+// Whether a material varies between strands or along them (any variation
+// key away from its default): only then does a renderer need strands and
+// eval_hair_material_point; otherwise one make_hair_precomputed serves all.
+bool hair_material_varies(const hair_material& material);
+
+// The material at one point of a groom, with nothing left to vary: r and r'
+// are the strand's two random values in [0, 1) (random.x, random.y), u the
+// point's place along the strand (0 at the root, 1 at the tip). The pigment parameter the material uses
+// (precedence as above) is blended from the root's value to the tip's from
+// u = tip_start to u = 1 (linearly, a tip value left out is the root's);
+// then sigma_a = that pigment's absorption (the colour's mapped with the
+// material's beta_n) times 1 + (2 r - 1) random_melanin (Cycles' Random
+// Color: for melanin it is each concentration scaled by the factor, as
+// sigma_a is linear in them), plus the tint's absorption (Chiang et al. 2016
+// section 4.2, the colour mapping). beta_m and beta_n are scaled by 1 + (2 r'
+// - 1) random_roughness (so that pigment and roughness vary independently)
+// and clamped to [0.01, 1]. The result has has_sigma_a set.
+hair_material eval_hair_material_point(
+    const hair_material& material, const vec2f& random, float u);
 
 // Everything that depends on the material alone; compute it once per material
 // (the renderer may cache it) and pass it to eval_hair_brdf for each hit.
@@ -101,6 +135,11 @@ struct hair_brdf {
 // variant; the same values within float rounding).
 hair_precomputed make_hair_precomputed(
     const hair_material& material, bool fast_pow = false);
+
+// The absorption make_hair_precomputed takes from a material (by the
+// precedence above, negative components as 0, infinite ones as 1e30): the
+// one term a renderer recomputes where only a groom's pigments vary.
+vec3f make_hair_absorption(const hair_material& material);
 
 // Per-hit terms. frame: x = fiber tangent, z = shading normal facing the
 // outgoing direction, o unused; z is orthogonalised against x and y is
