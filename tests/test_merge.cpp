@@ -3,15 +3,18 @@
 // part files, and `yscene merge` against one render, bit for bit.
 //
 
+#include <OpenImageIO/imageio.h>
 #include <gtest/gtest.h>
 #include <unistd.h>
 #include <yocto/yocto_sampling.h>
 #include <yocto/yocto_sceneio.h>
 #include <yocto/yocto_trace.h>
 
+#include <algorithm>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <sstream>
 
 #include "run_yscene.h"
@@ -538,5 +541,200 @@ TEST(merge, bad_sample_ranges_are_refused) {
   expect_failure(run_yscene("render " + fixture.scene + " -o " + output +
                             " --samples 14 --sample-range 0:3 --checkpoints" + fixture.settings),
       "--sample-range");
+  fs::remove_all(fixture.dir);
+}
+
+// -----------------------------------------------------------------------------
+// AOVS IN PARTS
+// -----------------------------------------------------------------------------
+
+// An EXR's channels as written: names, formats and the pixels in their
+// native layout (what a part needs to be written back unchanged).
+struct exr_channels {
+  OIIO::ImageSpec            spec   = {};
+  std::vector<unsigned char> pixels = {};
+};
+static bool read_exr(const std::string& filename, exr_channels& exr) {
+  auto input = OIIO::ImageInput::open(filename);
+  if (!input) return false;
+  exr.spec = input->spec();
+  exr.pixels.resize(exr.spec.image_bytes(true));
+  auto ok = input->read_image(0, 0, 0, exr.spec.nchannels, OIIO::TypeDesc::UNKNOWN,
+      exr.pixels.data());
+  input->close();
+  return ok;
+}
+static bool write_exr(const std::string& filename, const exr_channels& exr) {
+  auto output = OIIO::ImageOutput::create(filename);
+  if (!output || !output->open(filename, exr.spec)) return false;
+  auto ok = output->write_image(OIIO::TypeDesc::UNKNOWN, exr.pixels.data());
+  return output->close() && ok;
+}
+
+// An image's channels by name, each a float per pixel (an EXR of yscene
+// render --aovs, or of yscene merge).
+static std::map<std::string, std::vector<float>> read_float_channels(const std::string& filename) {
+  auto channels = std::map<std::string, std::vector<float>>{};
+  auto input    = OIIO::ImageInput::open(filename);
+  EXPECT_TRUE(input) << filename << ": " << OIIO::geterror();
+  if (!input) return channels;
+  auto& spec   = input->spec();
+  auto  pixels = (size_t)spec.width * spec.height;
+  auto  values = std::vector<float>(pixels * spec.nchannels);
+  EXPECT_TRUE(input->read_image(0, 0, 0, spec.nchannels, OIIO::TypeDesc::FLOAT, values.data()))
+      << filename;
+  for (auto c = 0; c < spec.nchannels; c++) {
+    auto& channel = channels[spec.channelnames[c]];
+    for (size_t i = 0; i < pixels; i++) channel.push_back(values[i * spec.nchannels + c]);
+  }
+  input->close();
+  return channels;
+}
+
+// Every channel of two images has the same name and bits, pixel by pixel.
+static void expect_same_channels(const std::string& merged, const std::string& whole) {
+  auto a = read_float_channels(merged), b = read_float_channels(whole);
+  ASSERT_EQ(a.size(), b.size()) << merged;
+  for (auto& [name, values] : b) {
+    ASSERT_TRUE(a.count(name)) << merged << " has no channel " << name;
+    auto& other = a.at(name);
+    ASSERT_EQ(other.size(), values.size()) << name;
+    EXPECT_EQ(std::memcmp(other.data(), values.data(), values.size() * sizeof(float)), 0)
+        << merged << ": channel " << name << " differs from " << whole;
+  }
+}
+
+// Three uneven parts 0:2, 2:9 and 9:14 of the fixture's render with --aovs
+// (1, 2 and 1 threads), merged in another order, give an EXR with the 26
+// channels of one render's --aovs output (R, G, B and the nine layers),
+// each bit for bit; so does a tree merge through an intermediate part
+// (which keeps the AOV sums). The lobe, depth and coverage layers are not
+// all zero (the comparison is not vacuous).
+TEST(merge, aov_parts_merge_into_the_single_render_layer_for_layer) {
+  auto fixture = make_merge_fixture("aovs");
+  fixture.settings += " --aovs";
+  render_whole(fixture, "whole.exr");
+  auto whole = (fixture.dir / "whole.exr").string();
+  auto parts = std::vector<std::string>{render_part_file(fixture, 2, 9, 2),
+      render_part_file(fixture, 9, 14, 1), render_part_file(fixture, 0, 2, 1)};
+  auto part  = render_part{};
+  auto error = std::string{};
+  ASSERT_TRUE(load_render_part(parts[0], part, error)) << error;
+  EXPECT_EQ(part.extra, trace_aov_sums);
+  EXPECT_EQ(part.extra_sums.size(), part.sums.size() * trace_aov_sums);
+  auto merged = (fixture.dir / "merged.exr").string();
+  auto result = merge_files(parts, merged);
+  ASSERT_EQ(result.status, 0) << result.output;
+  auto channels = read_float_channels(whole);
+  EXPECT_EQ(channels.size(), 26u);
+  for (auto name : {"albedo.G", "normal.Z", "tangent.X", "hair_R.R", "hair_TT.G", "hair_TRT.B",
+           "hair_TRRT.R", "depth.Z", "coverage.Y"}) {
+    ASSERT_TRUE(channels.count(name)) << name;
+    auto& values = channels.at(name);
+    EXPECT_TRUE(std::any_of(values.begin(), values.end(), [](float v) { return v != 0; }))
+        << name << " is all zero";
+  }
+  expect_same_channels(merged, whole);
+  auto low = (fixture.dir / "low.exr").string();
+  result   = merge_files({parts[2], parts[0]}, low, " --part");
+  ASSERT_EQ(result.status, 0) << result.output;
+  auto tree = (fixture.dir / "tree.exr").string();
+  result    = merge_files({parts[1], low}, tree);
+  ASSERT_EQ(result.status, 0) << result.output;
+  expect_same_channels(tree, whole);
+  fs::remove_all(fixture.dir);
+}
+
+// A part with AOVs and one without are not parts of one render: the merge
+// fails with one error line naming the setting (aovs), in either order, as
+// a part or an image, and writes nothing.
+TEST(merge, aov_and_plain_parts_do_not_mix) {
+  auto fixture = make_merge_fixture("aovmix");
+  auto plain   = render_part_file(fixture, 0, 5, 2);
+  auto aovs    = render_part_file(fixture, 5, 14, 2, " --aovs");
+  for (auto output : {"out.exr", "part.exr"}) {
+    auto filename = (fixture.dir / output).string();
+    auto flags    = std::string(output) == "part.exr" ? " --part" : "";
+    for (auto& parts : {std::vector{plain, aovs}, std::vector{aovs, plain}}) {
+      auto result = merge_files(parts, filename, flags);
+      expect_failure(result, "aovs");
+      expect_failure(result, "not a part of the render of");
+      EXPECT_FALSE(fs::exists(filename)) << output;
+    }
+  }
+  fs::remove_all(fixture.dir);
+}
+
+// A part with AOVs whose extra sums were changed after it was written (one
+// bit of one word of one pixel's hair_TRT sum), or whose yocto:extra
+// attribute was dropped (its extra channels then look like someone else's),
+// fails its checksum: load_render_part says the part is damaged, and the
+// merge fails naming it. A part that lost an extra channel is refused as not
+// a part, naming the channel. The part rewritten unchanged still merges
+// (the rewriting itself damages nothing).
+TEST(merge, aov_parts_with_damaged_extra_sums_fail_their_checksum) {
+  auto fixture = make_merge_fixture("aovdamaged");
+  fixture.settings += " --aovs";
+  auto low   = render_part_file(fixture, 0, 5, 2);
+  auto high  = render_part_file(fixture, 5, 14, 2);
+  auto exr   = exr_channels{};
+  ASSERT_TRUE(read_exr(high, exr));
+  auto& spec  = exr.spec;
+  auto  words = std::vector<size_t>{};  // byte offset of each channel in a pixel
+  for (auto c = 0, offset = 0; c < spec.nchannels; c++) {
+    words.push_back(offset);
+    offset += (int)spec.channelformat(c).size();
+  }
+  auto channel = [&](const std::string& name) {
+    auto found = std::find(spec.channelnames.begin(), spec.channelnames.end(), name);
+    EXPECT_NE(found, spec.channelnames.end()) << name;
+    return (int)(found - spec.channelnames.begin());
+  };
+  auto rewrite = [&](const std::string& name, const exr_channels& changed) {
+    auto filename = (fixture.dir / name).string();
+    EXPECT_TRUE(write_exr(filename, changed)) << name << ": " << OIIO::geterror();
+    return filename;
+  };
+  auto output = (fixture.dir / "out.exr").string();
+  // Unchanged: still a good part.
+  auto same   = rewrite("same.exr", exr);
+  auto result = merge_files({low, same}, output);
+  EXPECT_EQ(result.status, 0) << result.output;
+  fs::remove(output);
+  // One bit of the low word of extra sum 5 (hair_TRT), green, at pixel 777.
+  auto flipped = exr;
+  auto index   = channel("extra.5.G.0");
+  ASSERT_EQ(spec.channelformat(index), OIIO::TypeDesc::UINT32);
+  flipped.pixels[777 * spec.pixel_bytes(true) + words[index]] ^= 0x04;
+  auto damaged = rewrite("damaged.exr", flipped);
+  auto part    = render_part{};
+  auto error   = std::string{};
+  EXPECT_FALSE(load_render_part(damaged, part, error));
+  EXPECT_NE(error.find("damaged.exr: render part is damaged"), std::string::npos) << error;
+  expect_failure(merge_files({low, damaged}, output), "damaged.exr: render part is damaged");
+  EXPECT_FALSE(fs::exists(output));
+  // The attribute that says how many extra sums a pixel has, dropped.
+  auto unmarked = exr;
+  unmarked.spec.erase_attribute("yocto:extra");
+  auto lost = rewrite("unmarked.exr", unmarked);
+  EXPECT_FALSE(load_render_part(lost, part, error));
+  EXPECT_NE(error.find("unmarked.exr: render part is damaged"), std::string::npos) << error;
+  // An extra channel dropped (the last one, extra.7.B.5).
+  auto cut      = exr_channels{};
+  auto last     = channel("extra.7.B.5");
+  cut.spec      = spec;
+  cut.spec.nchannels--;
+  cut.spec.channelnames.erase(cut.spec.channelnames.begin() + last);
+  cut.spec.channelformats.erase(cut.spec.channelformats.begin() + last);
+  auto pixel_bytes = spec.pixel_bytes(true), word = spec.channelformat(last).size();
+  for (size_t i = 0; i < (size_t)spec.width * spec.height; i++) {
+    auto pixel = exr.pixels.data() + i * pixel_bytes;
+    cut.pixels.insert(cut.pixels.end(), pixel, pixel + words[last]);
+    cut.pixels.insert(cut.pixels.end(), pixel + words[last] + word, pixel + pixel_bytes);
+  }
+  auto missing = rewrite("missing.exr", cut);
+  EXPECT_FALSE(load_render_part(missing, part, error));
+  EXPECT_NE(error.find("extra.7.B.5"), std::string::npos) << error;
+  expect_failure(merge_files({low, missing}, output), "missing.exr");
   fs::remove_all(fixture.dir);
 }

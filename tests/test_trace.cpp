@@ -8,6 +8,7 @@
 
 #include <cmath>
 #include <limits>
+#include <stdexcept>
 
 using namespace yocto;
 
@@ -693,8 +694,693 @@ TEST(trace, hair_lobe_weights_render_like_mixture_weights) {
   params.seed       = 8;
   params.roulette_threshold = 0.5f;
   auto lobe         = render_scene(scene, params);
-  params.hair_mixture_weight = true;
+  params.hair_sampling.mixture_weight = true;
   auto mixture      = render_scene(scene, params);
   EXPECT_NE(lobe.image.pixels, mixture.image.pixels);
   expect_same_mean(lobe, mixture, "lobe weights against mixture weights");
+}
+
+// -----------------------------------------------------------------------------
+// AOVS
+// -----------------------------------------------------------------------------
+
+// A render with params.aovs (or without): the beauty, its sums and the AOV
+// layers.
+struct aov_render {
+  texture_data             image     = {};
+  std::vector<fixed_sum3>  sums      = {};
+  std::vector<fixed_sum3>  aov_sums  = {};
+  std::vector<image_layer> layers    = {};
+  int64_t                  rays      = 0;
+  int64_t                  nonfinite = 0;
+};
+
+// Renders samples first ... first + params.samples - 1.
+static aov_render render_aovs(const scene_data& scene, const trace_params& params, int first = 0) {
+  auto bvh   = scene_bvh{};
+  auto error = std::string{};
+  EXPECT_TRUE(make_scene_bvh(bvh, scene, {}, error)) << error;
+  EXPECT_TRUE(check_trace_params(scene, params, error)) << error;
+  auto context = make_trace_context(scene, params);
+  auto state   = trace_state{};
+  init_trace_state(state, scene, params, first);
+  trace_samples(state, scene, bvh, context, params, params.samples);
+  return {get_image(state), state.sums, state.aov_sums,
+      get_aov_layers(state.width, state.height, state.aov_sums, state.samples),
+      state.rays.load(), state.nonfinite.load()};
+}
+
+// The layer of that name (an exception fails the test if there is none).
+static const image_layer& find_layer(const aov_render& render, const std::string& name) {
+  for (auto& layer : render.layers)
+    if (layer.name == name) return layer;
+  throw std::runtime_error("no AOV layer " + name);
+}
+// Pixel i of a layer of three channels, and of one.
+static vec3f layer3(const aov_render& render, const std::string& name, int i) {
+  auto& pixels = find_layer(render, name).pixels;
+  return {pixels.at(3 * i), pixels.at(3 * i + 1), pixels.at(3 * i + 2)};
+}
+static float layer1(const aov_render& render, const std::string& name, int i) {
+  return find_layer(render, name).pixels.at(i);
+}
+
+static const auto hair_lobe_layers = std::array<std::string, 4>{
+    "hair_R", "hair_TT", "hair_TRT", "hair_TRRT"};
+
+// The sum of the four lobe layers at pixel i, and of their absolute values.
+static vec3f lobe_sum(const aov_render& render, int i, bool absolute = false) {
+  auto sum = vec3f{0, 0, 0};
+  for (auto& name : hair_lobe_layers)
+    sum += absolute ? abs(layer3(render, name, i)) : layer3(render, name, i);
+  return sum;
+}
+
+// An orthographic camera at z = 5 looking down -z at a 2.4 x 2.4 square
+// around the z axis (rays along exactly (0, 0, -1)), four straight fibres of
+// radius 0.15 across it (lines, about one per quarter of the image, with
+// known tangents: horizontal, tilted towards the camera by atan(1/2), tilted
+// and running right to left, and tilted by atan(3/2)), or `only` one of them,
+// and, if asked, a matte sphere behind them; a constant white sky.
+static const auto aov_fibre_radius = 0.15f;
+static const auto aov_fibre_ends   = std::array<std::pair<vec3f, vec3f>, 4>{
+    std::pair{vec3f{-2, 0.72f, 0}, vec3f{2, 0.72f, 0}},
+    std::pair{vec3f{-2, 0.27f, -1}, vec3f{2, 0.27f, 1}},
+    std::pair{vec3f{2, -0.22f, 0.5f}, vec3f{-2, -0.22f, -0.5f}},
+    std::pair{vec3f{-2, -0.77f, -3}, vec3f{2, -0.77f, 3}}};
+static scene_data make_aov_fibre_scene(
+    const hair_material& hair, bool sphere, int only = -1) {
+  auto scene  = scene_data{};
+  auto camera = camera_data{};
+  camera.frame        = translation_frame({0, 0, 5});
+  camera.orthographic = true;
+  camera.lens         = 0.036f;
+  camera.film         = 0.036f;
+  camera.focus        = 2.4f;
+  camera.aspect       = 1;
+  scene.cameras.push_back(camera);
+  scene.environments.push_back({identity3x4f, {1, 1, 1}, -1});
+  auto fibres = shape_data{};
+  for (auto k = 0; k < (int)aov_fibre_ends.size(); k++) {
+    if (only >= 0 && k != only) continue;
+    auto [root, tip] = aov_fibre_ends[k];
+    fibres.lines.push_back({(int)fibres.positions.size(), (int)fibres.positions.size() + 1});
+    fibres.positions.insert(fibres.positions.end(), {root, tip});
+    fibres.radius.insert(fibres.radius.end(), {aov_fibre_radius, aov_fibre_radius});
+  }
+  scene.shapes.push_back(fibres);
+  auto material = material_data{};
+  material.type = material_type::hair;
+  material.hair = hair;
+  scene.materials.push_back(material);
+  scene.instances.push_back({identity3x4f, 0, 0});
+  if (sphere) {
+    scene.shapes.push_back(make_sphere_shape(64, 1));
+    auto matte  = material_data{};
+    matte.color = {0.3f, 0.6f, 0.9f};
+    scene.materials.push_back(matte);
+    scene.instances.push_back({translation_frame({0, 0, -3}), 1, 1});
+  }
+  return scene;
+}
+
+// The hair test scene without its sphere: hair and sky only.
+static scene_data make_hair_only_scene() {
+  auto scene = make_hair_test_scene();
+  scene.instances.pop_back();
+  return scene;
+}
+
+TEST(trace, aov_layers_are_named_and_sized) {
+  // The nine layers in the order of get_aov_layers (albedo, normal, tangent,
+  // the four lobes, depth, coverage) with their channels, one value a
+  // channel and pixel; none from sums of the wrong size.
+  auto params       = trace_params{};
+  params.resolution = 8;
+  params.samples    = 1;
+  params.aovs       = true;
+  auto render       = render_aovs(make_hair_test_scene(), params);
+  auto expected     = std::vector<std::pair<std::string, std::string>>{{"albedo", "RGB"},
+          {"normal", "XYZ"}, {"tangent", "XYZ"}, {"hair_R", "RGB"}, {"hair_TT", "RGB"},
+          {"hair_TRT", "RGB"}, {"hair_TRRT", "RGB"}, {"depth", "Z"}, {"coverage", "Y"}};
+  ASSERT_EQ(render.layers.size(), expected.size());
+  for (size_t k = 0; k < expected.size(); k++) {
+    auto& layer    = render.layers[k];
+    auto  channels = std::string{};
+    for (auto& channel : layer.channels) channels += channel;
+    EXPECT_EQ(layer.name, expected[k].first);
+    EXPECT_EQ(channels, expected[k].second) << layer.name;
+    EXPECT_EQ(layer.pixels.size(), 64 * channels.size()) << layer.name;
+  }
+  EXPECT_EQ(render.aov_sums.size(), 64u * trace_aov_sums);
+  EXPECT_TRUE(get_aov_layers(8, 8, std::vector<fixed_sum3>(64 * trace_aov_sums - 1), 1).empty());
+}
+
+TEST(trace, aovs_white_furnace) {
+  // White hair (sigma_a = 0, default roughness and tilt) alone under a
+  // constant white sky, the hair test scene's curves at 24x24, 4 spp, the
+  // lobe-weight path (no lights) and fixed seed. Each hair hit's albedo is 1
+  // (sum of A_p = 1 within 1e-6), so the albedo layer equals the coverage
+  // within 1e-5: 1 wherever coverage is 1 (and the test needs such pixels).
+  // Every path carries all its energy to the sky (the lobe weight of a white
+  // fibre is 1), so the beauty is 1 within 1e-4 at every pixel, and the lobe
+  // layers sum to the coverage within 1e-4.
+  auto scene = make_hair_only_scene();
+  scene.environments[0].emission = {1, 1, 1};
+  scene.materials[0].hair.has_sigma_a = true;
+  scene.materials[0].hair.sigma_a     = {0, 0, 0};
+  auto params       = trace_params{};
+  params.resolution = 24;
+  params.samples    = 4;
+  params.seed       = 12;
+  params.aovs       = true;
+  auto render       = render_aovs(scene, params);
+  EXPECT_EQ(render.nonfinite, 0);
+  auto covered = 0, partial = 0;
+  auto worst_albedo = 0.0f, worst_beauty = 0.0f, worst_lobes = 0.0f;
+  for (auto i = 0; i < (int)render.image.pixels.size(); i++) {
+    auto coverage = layer1(render, "coverage", i);
+    auto albedo   = layer3(render, "albedo", i);
+    if (coverage == 1) covered++;
+    if (coverage > 0 && coverage < 1) partial++;
+    worst_albedo = std::max(worst_albedo, max_component(abs(albedo - coverage)));
+    worst_beauty = std::max(worst_beauty, max_component(abs(render.image.pixels[i] - 1.0f)));
+    worst_lobes  = std::max(worst_lobes, max_component(abs(lobe_sum(render, i) - coverage)));
+    if (coverage == 1) EXPECT_NEAR(min_component(albedo), 1, 1e-5f) << "pixel " << i;
+  }
+  std::printf("[ figure ] AOV furnace: %d pixels covered, %d partly; worst |albedo - coverage| "
+              "%.2g, |beauty - 1| %.2g, |lobes - coverage| %.2g\n",
+      covered, partial, worst_albedo, worst_beauty, worst_lobes);
+  EXPECT_GT(covered, 10);
+  EXPECT_GT(partial, 10);
+  EXPECT_LE(worst_albedo, 1e-5f);
+  EXPECT_LE(worst_beauty, 1e-4f);
+  EXPECT_LE(worst_lobes, 1e-4f);
+}
+
+// The brdf of a hit seen along -z, with the lobes of the direction (0, 0, 1)
+// to the camera: the fibre frame the tracer builds (x the tangent, z the
+// direction to the camera without its tangent part, y = z x x), and the
+// offset h read back from the normal (normal = z sqrt(1 - h^2) + y h).
+static hair_brdf aov_hit_brdf(const hair_material& material, const vec3f& tangent,
+    const vec3f& normal) {
+  auto x = tangent;
+  auto z = normalize(vec3f{0, 0, 1} - dot(vec3f{0, 0, 1}, x) * x);
+  auto y = cross(z, x);
+  return eval_hair_brdf(make_hair_precomputed(material), dot(normal, y), frame3f{x, y, z, {}},
+      {0, 0, 1});
+}
+
+TEST(trace, aov_albedo_is_the_hair_albedo_of_the_hit) {
+  // The orthographic fibre scene at 1 spp (each pixel one sample; 32x32, two
+  // renders of samples 0 and 1, fixed seed): wherever the sample hit hair
+  // (coverage 1), the albedo layer is eval_hair_albedo of the fibre frame and
+  // offset h of the hit, rebuilt from the tangent and normal layers, for the
+  // camera direction (0, 0, 1); within 1e-4 (h read back from the normal is
+  // good to 1e-7, and the albedo's slope in h is below 100 for h within 1 -
+  // 1e-4 of the edge). Two materials: melanin 0.8 with default roughness and
+  // tilt (2 degrees), and a sigma_a with beta_m 0.1, beta_n 0.7 and alpha 0.
+  // The four fibres see theta_o = 0, 0.46, -0.24 and 0.98.
+  auto brown      = hair_material{};
+  brown.eumelanin = 0.8f;
+  auto coloured   = hair_material{};
+  coloured.has_sigma_a = true;
+  coloured.sigma_a     = {0.2f, 0.6f, 1.5f};
+  coloured.beta_m      = 0.1f;
+  coloured.beta_n      = 0.7f;
+  coloured.alpha       = 0;
+  for (auto& material : {brown, coloured}) {
+    auto scene        = make_aov_fibre_scene(material, false);
+    auto params       = trace_params{};
+    params.resolution = 32;
+    params.samples    = 1;
+    params.seed       = 31;
+    params.aovs       = true;
+    auto compared = 0;
+    auto worst    = 0.0f;
+    auto spread   = std::array<float, 2>{1, 0};  // the albedos seen, so that h matters
+    for (auto first : {0, 1}) {
+      auto render = render_aovs(scene, params, first);
+      for (auto i = 0; i < (int)render.image.pixels.size(); i++) {
+        if (layer1(render, "coverage", i) != 1) continue;
+        auto tangent  = layer3(render, "tangent", i);
+        auto normal   = layer3(render, "normal", i);
+        auto brdf     = aov_hit_brdf(material, tangent, normal);
+        auto expected = clamp(eval_hair_albedo(brdf, {0, 0, 1}), 0.0f, 1.0f);
+        auto albedo   = layer3(render, "albedo", i);
+        auto error    = max_component(abs(albedo - expected));
+        worst         = std::max(worst, error);
+        spread        = {std::min(spread[0], albedo.y), std::max(spread[1], albedo.y)};
+        compared++;
+        EXPECT_LE(error, 1e-4f) << "pixel " << i << " h " << brdf.h << ": albedo ("
+                                << albedo.x << ", " << albedo.y << ", " << albedo.z
+                                << "), expected (" << expected.x << ", " << expected.y << ", "
+                                << expected.z << ")";
+      }
+    }
+    std::printf("[ figure ] AOV albedo of %d hair hits: worst error %.2g, green from %.3f "
+                "to %.3f\n", compared, worst, spread[0], spread[1]);
+    EXPECT_GT(compared, 100);
+    EXPECT_GT(spread[1] - spread[0], 0.05f);
+  }
+}
+
+TEST(trace, aov_normals_tangents_and_depth_of_first_hits) {
+  // The orthographic fibre scene with the sphere behind, 32x32 at 1 spp
+  // (two renders, samples 0 and 1; fixed seed). Where the sample hit
+  // something (depth > 0): the normal has unit length (1e-5) and faces the
+  // camera (dot with (0, 0, 1), the direction to the camera, > 0); the
+  // tangent has unit length. Fibres (coverage 1): the tangent is one of the
+  // four lines' directions, root to tip (1e-5), and orthogonal to the normal
+  // (1e-5); on the horizontal fibre (axis at z = 0) the depth is 5 - r
+  // normal.z within 1e-3 (the hit lies on the cylinder where the normal
+  // says). The sphere (coverage 0): the tangent is the normal, the depth in
+  // [7, 8]. Where the sample escaped everything is 0. Each kind is seen.
+  auto scene        = make_aov_fibre_scene(hair_material{}, true);
+  auto params       = trace_params{};
+  params.resolution = 32;
+  params.samples    = 1;
+  params.seed       = 7;
+  params.aovs       = true;
+  auto directions   = std::vector<vec3f>{};
+  for (auto& [root, tip] : aov_fibre_ends) directions.push_back(normalize(tip - root));
+  auto fibres  = std::array<int, 4>{};
+  auto spheres = 0, escaped = 0;
+  auto least_facing = 1.0f;
+  for (auto first : {0, 1}) {
+    auto render = render_aovs(scene, params, first);
+    for (auto i = 0; i < (int)render.image.pixels.size(); i++) {
+      auto depth    = layer1(render, "depth", i);
+      auto coverage = layer1(render, "coverage", i);
+      auto normal   = layer3(render, "normal", i);
+      auto tangent  = layer3(render, "tangent", i);
+      if (depth == 0) {
+        escaped++;
+        EXPECT_EQ(coverage, 0) << i;
+        EXPECT_EQ(normal, (vec3f{0, 0, 0})) << i;
+        EXPECT_EQ(tangent, (vec3f{0, 0, 0})) << i;
+        EXPECT_EQ(layer3(render, "albedo", i), (vec3f{0, 0, 0})) << i;
+        continue;
+      }
+      EXPECT_NEAR(length(normal), 1, 1e-5f) << i;
+      EXPECT_NEAR(length(tangent), 1, 1e-5f) << i;
+      EXPECT_GT(normal.z, 0) << "pixel " << i << " coverage " << coverage;
+      least_facing = std::min(least_facing, normal.z);
+      if (coverage == 1) {
+        auto fibre = -1;
+        for (auto k = 0; k < 4; k++)
+          if (max_component(abs(tangent - directions[k])) <= 1e-5f) fibre = k;
+        ASSERT_GE(fibre, 0) << "pixel " << i << ": tangent (" << tangent.x << ", " << tangent.y
+                            << ", " << tangent.z << ") is no fibre's, root to tip";
+        fibres[fibre]++;
+        EXPECT_NEAR(dot(tangent, normal), 0, 1e-5f) << i;
+        if (fibre == 0) EXPECT_NEAR(depth, 5 - aov_fibre_radius * normal.z, 1e-3f) << i;
+      } else {
+        EXPECT_EQ(coverage, 0) << i;
+        spheres++;
+        EXPECT_EQ(tangent, normal) << i;
+        EXPECT_GE(depth, 7 - 1e-3f) << i;
+        EXPECT_LE(depth, 8 + 1e-3f) << i;
+      }
+    }
+  }
+  std::printf("[ figure ] AOV first hits: fibres %d %d %d %d, sphere %d, sky %d; least "
+              "normal.z %.3g\n", fibres[0], fibres[1], fibres[2], fibres[3], spheres, escaped,
+      least_facing);
+  for (auto k = 0; k < 4; k++) EXPECT_GT(fibres[k], 20) << "fibre " << k;
+  EXPECT_GT(spheres, 100);
+  EXPECT_GT(escaped, 100);
+}
+
+// A ray that runs along a fibre (here every ray of an orthographic camera
+// looking down a fibre's axis, lines and curves) meets no side of it: the
+// AOV normal is then the tangent towards the camera (the end cap's), not
+// eval_fiber_point's arbitrary frame (perpendicular to the view, which the
+// AOV of 60c9418 gave). 16x16 at 1 spp: at every pixel whose sample hit the
+// fibre's end, the normal must face the camera (normal.z > 0).
+TEST(trace, aov_normal_of_a_fibre_seen_end_on_faces_the_camera) {
+  for (auto curves : {false, true}) {
+    auto scene   = make_aov_fibre_scene(hair_material{}, false);
+    auto fibre   = shape_data{};
+    for (auto k = 0; k < 4; k++) {
+      fibre.positions.push_back({0.3f, 0, 1 - 2 * k / 3.0f});
+      fibre.radius.push_back(0.5f);
+    }
+    if (curves) fibre.curves.push_back({0, 1, 2, 3});
+    if (!curves) fibre.lines = {{0, 1}, {1, 2}, {2, 3}};
+    scene.shapes[0]   = fibre;
+    auto params       = trace_params{};
+    params.resolution = 16;
+    params.samples    = 1;
+    params.aovs       = true;
+    auto render       = render_aovs(scene, params);
+    auto hits = 0, facing = 0;
+    for (auto i = 0; i < (int)render.image.pixels.size(); i++) {
+      if (layer1(render, "coverage", i) != 1) continue;
+      hits++;
+      facing += layer3(render, "normal", i).z > 0;
+    }
+    EXPECT_GT(hits, 10);
+    EXPECT_EQ(facing, hits) << (curves ? "curves" : "lines");
+  }
+}
+
+TEST(trace, aov_depth_averages_the_hits_and_coverage_counts_hair) {
+  // The orthographic fibre scene with the sphere, 32x32 at 16 spp (fixed
+  // seed): coverage is a multiple of 1/16 in [0, 1]; pixels where only the
+  // horizontal fibre is hit (tangent layer = coverage x (1, 0, 0), no
+  // sphere behind: the top quarter) have a depth in [5 - r, 5] (the mean over
+  // the samples that hit, not over all samples) even where the coverage is
+  // below 1; and pixels with sky and sphere only have coverage 0 and a depth
+  // in [7, 8].
+  auto scene        = make_aov_fibre_scene(hair_material{}, true);
+  auto params       = trace_params{};
+  params.resolution = 32;
+  params.samples    = 16;
+  params.seed       = 3;
+  params.aovs       = true;
+  auto render       = render_aovs(scene, params);
+  auto partial = 0, sphere_only = 0;
+  for (auto i = 0; i < (int)render.image.pixels.size(); i++) {
+    auto coverage = layer1(render, "coverage", i);
+    auto depth    = layer1(render, "depth", i);
+    auto tangent  = layer3(render, "tangent", i);
+    EXPECT_GE(coverage, 0);
+    EXPECT_LE(coverage, 1);
+    EXPECT_EQ(coverage * 16, std::round(coverage * 16)) << i;
+    auto row = i / 32;
+    if (row < 8 && coverage > 0 &&
+        max_component(abs(tangent - vec3f{coverage, 0, 0})) <= 1e-5f) {
+      if (coverage < 1) partial++;
+      EXPECT_GE(depth, 5 - aov_fibre_radius - 1e-3f) << i << " coverage " << coverage;
+      EXPECT_LE(depth, 5 + 1e-3f) << i << " coverage " << coverage;
+    }
+    if (coverage == 0 && depth > 0) {
+      sphere_only++;
+      EXPECT_GE(depth, 7 - 1e-3f) << i;
+      EXPECT_LE(depth, 8 + 1e-3f) << i;
+    }
+  }
+  EXPECT_GT(partial, 10);
+  EXPECT_GT(sphere_only, 100);
+}
+
+TEST(trace, aov_layers_are_finite_and_in_range) {
+  // The hair test scene (hair, a matte sphere) under the lit scene's
+  // textured sky, 24x24 at 8 spp, with split 2 and clamp 5 (fixed seed):
+  // every value of every layer is finite; coverage in [0, 1]; depth > 0
+  // wherever coverage > 0, and 0 only where albedo and normal are 0 too;
+  // albedo in [0, 1]; lobes non-negative.
+  auto scene = make_hair_test_scene();
+  auto lit   = make_lit_scene();
+  scene.textures     = lit.textures;
+  scene.environments = lit.environments;
+  auto params       = trace_params{};
+  params.resolution = 24;
+  params.samples    = 8;
+  params.seed       = 19;
+  params.split      = 2;
+  params.clamp      = 5;
+  params.aovs       = true;
+  auto render       = render_aovs(scene, params);
+  EXPECT_EQ(render.nonfinite, 0);
+  for (auto& layer : render.layers) {
+    for (auto value : layer.pixels) ASSERT_TRUE(std::isfinite(value)) << layer.name;
+  }
+  auto hair = 0, empty = 0;
+  for (auto i = 0; i < (int)render.image.pixels.size(); i++) {
+    auto coverage = layer1(render, "coverage", i);
+    auto depth    = layer1(render, "depth", i);
+    auto albedo   = layer3(render, "albedo", i);
+    EXPECT_GE(coverage, 0) << i;
+    EXPECT_LE(coverage, 1) << i;
+    if (coverage > 0) {
+      hair++;
+      EXPECT_GT(depth, 0) << i;
+    }
+    if (depth == 0) {
+      empty++;
+      EXPECT_EQ(albedo, (vec3f{0, 0, 0})) << i;
+      EXPECT_EQ(layer3(render, "normal", i), (vec3f{0, 0, 0})) << i;
+    }
+    EXPECT_GE(min_component(albedo), 0) << i;
+    EXPECT_LE(max_component(albedo), 1) << i;
+    for (auto& name : hair_lobe_layers) EXPECT_GE(min_component(layer3(render, name, i)), 0);
+  }
+  EXPECT_GT(hair, 50);
+  EXPECT_GT(empty, 20);
+}
+
+// Checks, per pixel, that the beauty is the sum of the lobe layers plus what
+// the camera sees of the sky directly: under a constant sky E, E (1 -
+// coverage); at 1 spp (sky = null) the beauty itself where the sample did
+// not hit hair (where the lobes must be 0). Tolerance: 2e-5 times the
+// largest of 1, the beauty and the sum of the lobes' absolute values (float
+// rounding of the path's sums in two orders). Returns the worst relative
+// error and counts the pixels that saw hair.
+static double expect_lobes_sum_to_beauty(const aov_render& render, const vec3f* sky,
+    const std::string& what, int& hair_pixels) {
+  auto worst  = 0.0;
+  hair_pixels = 0;
+  for (auto i = 0; i < (int)render.image.pixels.size(); i++) {
+    auto coverage = layer1(render, "coverage", i);
+    auto beauty   = render.image.pixels[i];
+    auto lobes    = lobe_sum(render, i);
+    if (coverage > 0) hair_pixels++;
+    auto direct = vec3f{0, 0, 0};
+    if (sky) {
+      direct = *sky * (1 - coverage);
+    } else if (coverage == 0) {
+      EXPECT_EQ(lobe_sum(render, i, true), (vec3f{0, 0, 0})) << what << " pixel " << i;
+      continue;
+    } else {
+      EXPECT_EQ(coverage, 1) << what << ": the check needs 1 spp";
+    }
+    auto scale = std::max({1.0f, max_component(abs(beauty)),
+        max_component(lobe_sum(render, i, true))});
+    auto error = max_component(abs(beauty - lobes - direct)) / scale;
+    worst      = std::max(worst, (double)error);
+    EXPECT_LE(error, 2e-5f) << what << " pixel " << i << ": beauty (" << beauty.x << ", "
+                            << beauty.y << ", " << beauty.z << "), lobes (" << lobes.x << ", "
+                            << lobes.y << ", " << lobes.z << "), coverage " << coverage;
+  }
+  std::printf("[ figure ] lobes %s: %d hair pixels, worst relative error %.2g\n", what.c_str(),
+      hair_pixels, worst);
+  return worst;
+}
+
+TEST(trace, aov_lobes_sum_to_the_beauty_of_the_hair) {
+  // Hair and sky only (the hair test scene without its sphere), 24x24, fixed
+  // seeds: per pixel the lobe layers sum to the beauty minus the sky seen
+  // directly (expect_lobes_sum_to_beauty, 2e-5 relative), along every way
+  // the tracer splits a path by lobe:
+  // - a constant sky at 4 spp: the lobe-weight path (the sampled lobe takes
+  //   the rest of the path), the mixture weight (lobes' shares of eval),
+  //   --lights all (the sky light-sampled: NEE split by lobe terms) and a
+  //   distant light (NEE of a delta light) with BSDF samples finding the sky;
+  // - at 1 spp, where a pixel's sample hit hair or not: a textured sky with a
+  //   bright spot (NEE, MIS), the same with split 3 and clamp 0.05 (lobes
+  //   scaled like the beauty; more than 20 hair pixels are clamped), the
+  //   naive sampler (lobe weights, no NEE) and four numbers a hair sample
+  //   (the mixture).
+  // Each case is rendered twice, from sample 0 and from sample 1.
+  struct lobe_case {
+    std::string name;
+    bool        textured = false;
+    bool        distant  = false;
+    int         samples  = 4;
+    std::function<void(trace_params&)> set = [](trace_params&) {};
+  };
+  auto cases = std::vector<lobe_case>{
+      {"constant sky, lobe weights", false, false, 4},
+      {"constant sky, mixture weights", false, false, 4,
+          [](trace_params& params) { params.hair_sampling.mixture_weight = true; }},
+      {"constant sky, sampled as a light", false, false, 4,
+          [](trace_params& params) { params.lights = trace_lights_type::all; }},
+      {"constant sky and a distant light", false, true, 4},
+      {"textured sky", true, false, 1},
+      {"textured sky, split 3, clamp 0.05", true, false, 1,
+          [](trace_params& params) { params.split = 3, params.clamp = 0.05f; }},
+      {"textured sky, naive", true, false, 1,
+          [](trace_params& params) { params.sampler = trace_sampler_type::naive; }},
+      {"textured sky, four numbers", true, false, 1,
+          [](trace_params& params) { params.hair_sampling.four_numbers = true; }},
+  };
+  auto lit = make_lit_scene();
+  for (auto& test : cases) {
+    auto scene = make_hair_only_scene();
+    auto sky   = scene.environments[0].emission;
+    if (test.textured) {
+      scene.textures     = lit.textures;
+      scene.environments = lit.environments;
+    }
+    if (test.distant) scene.distant_lights.push_back({{0.3f, 1, 0.5f}, {3, 2.5f, 2}});
+    auto params       = trace_params{};
+    params.resolution = 24;
+    params.samples    = test.samples;
+    params.seed       = 23;
+    params.aovs       = true;
+    test.set(params);
+    auto hair_pixels = 0, clamped = 0;
+    auto brightest   = 0.0f;
+    for (auto first : {0, 1}) {
+      auto render = render_aovs(scene, params, first);
+      EXPECT_EQ(render.nonfinite, 0) << test.name;
+      expect_lobes_sum_to_beauty(render, test.textured ? nullptr : &sky, test.name, hair_pixels);
+      EXPECT_GT(hair_pixels, 100) << test.name;
+      // Hair pixels whose sample was clamped (to 1e-6 relative).
+      for (auto i = 0; i < (int)render.image.pixels.size(); i++) {
+        auto value = max_component(render.image.pixels[i]);
+        if (params.clamp == 0 || layer1(render, "coverage", i) != 1) continue;
+        brightest = std::max(brightest, value);
+        clamped += std::abs(value - params.clamp) <= 1e-6f * params.clamp;
+      }
+    }
+    if (params.clamp == 0) continue;
+    std::printf("[ figure ] lobes %s: %d hair pixels clamped, brightest %g\n",
+        test.name.c_str(), clamped, brightest);
+    EXPECT_GT(clamped, 20) << test.name << ": too few hair pixels clamped";
+  }
+}
+
+TEST(trace, aov_lobes_of_lobe_and_mixture_weights_agree) {
+  // Under a constant sky the lobe-weight path gives all of a path's light
+  // after its first hair hit to the lobe it sampled there, the mixture
+  // weight splits it by the lobes' shares of eval at the sampled direction:
+  // both estimate each lobe's share. Hair and sky only, 24x24 at 512 spp,
+  // threshold 0.5, one seed (the two share their directions): per lobe, the
+  // mean over pixels of the difference of the two layers is within 4
+  // standard errors (mean_difference: pixels are independent samples) of 0,
+  // and 4 standard errors stay below 5% of the lobe's image mean (the check
+  // has power; TRRT, 0.1% of the light, is checked for the first alone). The
+  // lobe layers differ pixel by pixel (the estimators do differ).
+  auto scene        = make_hair_only_scene();
+  auto params       = trace_params{};
+  params.resolution = 24;
+  params.samples    = 512;
+  params.seed       = 29;
+  params.roulette_threshold = 0.5f;
+  params.aovs       = true;
+  auto lobe         = render_aovs(scene, params);
+  params.hair_sampling.mixture_weight = true;
+  auto mixture      = render_aovs(scene, params);
+  auto layer_image  = [](const aov_render& render, const std::string& name) {
+    auto image = texture_data{render.image.width, render.image.height, {}};
+    for (auto i = 0; i < (int)render.image.pixels.size(); i++)
+      image.pixels.push_back(layer3(render, name, i));
+    return image;
+  };
+  auto total = 0.0;
+  for (auto& name : hair_lobe_layers) total += image_mean(layer_image(lobe, name));
+  for (auto& name : hair_lobe_layers) {
+    auto a = layer_image(lobe, name), b = layer_image(mixture, name);
+    auto [difference, error] = mean_difference(a, b);
+    auto reference           = image_mean(b);
+    std::printf("[ figure ] AOV %s: lobe weights %.5f, mixture %.5f (%.1f%% of the hair's "
+                "light), difference %.2e +- %.2e\n",
+        name.c_str(), image_mean(a), reference, 100 * reference / total, difference, error);
+    EXPECT_LE(std::abs(difference), 4 * error) << name;
+    if (name != "hair_TRRT") EXPECT_LT(4 * error, 0.05 * reference) << name;
+    EXPECT_NE(a.pixels, b.pixels) << name;
+  }
+}
+
+TEST(trace, aov_lobes_of_a_lone_fibre_are_the_sky_times_a_p) {
+  // One straight fibre (the orthographic scene's second, theta_o = 0.46;
+  // melanin 0.8, default roughness and tilt) alone under a constant white
+  // sky: it cannot see itself, so the light of a path that hits it is, in
+  // expectation, the sky times sum_p A_p at the hit's h, lobe p bringing
+  // A_p. 64 renders of one sample (samples 0 ... 63 of 64x64 pixels, fixed
+  // seed; 32k hits) give every sample's lobe layers and, from the normal
+  // and tangent layers, its A_p (aov_hit_brdf): per lobe and channel the mean of lobe
+  // layer - A_p over the samples that hit hair is 0 within 4 standard errors
+  // (+ 1e-5), for the lobe-weight path, the mixture weight and the sky
+  // sampled as a light (the NEE split); and 4 standard errors stay below 10%
+  // of the mean A_p for R and TT, 30% for TRT (the check has power; TRRT,
+  // 0.2% of the light, is checked for the first alone).
+  auto material      = hair_material{};
+  material.eumelanin = 0.8f;
+  auto scene         = make_aov_fibre_scene(material, false, 1);
+  for (auto mode : {0, 1, 2}) {
+    auto params       = trace_params{};
+    params.resolution = 64;
+    params.samples    = 1;
+    params.seed       = 43;
+    params.aovs       = true;
+    params.hair_sampling.mixture_weight = mode == 1;
+    if (mode == 2) params.lights = trace_lights_type::all;
+    auto name = std::string(mode == 0   ? "lobe weights"
+                            : mode == 1 ? "mixture weights"
+                                        : "sky sampled as a light");
+    auto sums = std::array<glm::dvec3, 4>{}, sums2 = std::array<glm::dvec3, 4>{};
+    auto a_sums = std::array<glm::dvec3, 4>{};
+    auto hits   = 0;
+    for (auto first = 0; first < 64; first++) {
+      auto render = render_aovs(scene, params, first);
+      for (auto i = 0; i < (int)render.image.pixels.size(); i++) {
+        if (layer1(render, "coverage", i) != 1) continue;
+        auto brdf = aov_hit_brdf(
+            material, layer3(render, "tangent", i), layer3(render, "normal", i));
+        hits++;
+        for (auto p = 0; p < 4; p++) {
+          auto d = glm::dvec3(layer3(render, hair_lobe_layers[p], i) - brdf.lobes.a[p]);
+          sums[p] += d, sums2[p] += d * d;
+          a_sums[p] += glm::dvec3(brdf.lobes.a[p]);
+        }
+      }
+    }
+    for (auto p = 0; p < 4; p++) {
+      auto mean  = sums[p] / (double)hits;
+      auto error = sqrt(max(sums2[p] / (double)hits - mean * mean, glm::dvec3(0)) /
+                        (double)(hits - 1));
+      auto a     = a_sums[p] / (double)hits;
+      std::printf("[ figure ] lone fibre, %s, %s: %d hits, mean A_p (%.4f, %.4f, %.4f), "
+                  "layer - A_p (%.1e, %.1e, %.1e) +- (%.1e, %.1e, %.1e)\n",
+          name.c_str(), hair_lobe_layers[p].c_str(), hits, a.x, a.y, a.z, mean.x, mean.y,
+          mean.z, error.x, error.y, error.z);
+      for (auto c = 0; c < 3; c++) {
+        EXPECT_LE(std::abs(mean[c]), 4 * error[c] + 1e-5) << name << " lobe " << p << " " << c;
+        if (p < 3) EXPECT_LT(4 * error[c], (p < 2 ? 0.1 : 0.3) * a[c]) << name << " lobe " << p;
+      }
+    }
+    EXPECT_GT(hits, 10000) << name;
+  }
+}
+
+TEST(trace, aovs_leave_the_beauty_bit_for_bit) {
+  // With params.aovs off the AOV sums stay empty (and give no layers); on,
+  // the beauty's sums and the rays are the same, bit for bit: the hair test
+  // scene at 16x16, 4 spp, under a constant sky (lobe weights), with mixture
+  // weights, under the textured sky (NEE), with split 2 and clamp 1, and
+  // with the naive sampler.
+  auto lit      = make_lit_scene();
+  auto constant = make_hair_test_scene();
+  auto textured = constant;
+  textured.textures     = lit.textures;
+  textured.environments = lit.environments;
+  auto base       = trace_params{};
+  base.resolution = 16;
+  base.samples    = 4;
+  base.seed       = 37;
+  auto cases = std::vector<std::pair<bool, trace_params>>{};
+  for (auto k = 0; k < 5; k++) {
+    auto params = base;
+    if (k == 1) params.hair_sampling.mixture_weight = true;
+    if (k == 3) params.split = 2, params.clamp = 1;
+    if (k == 4) params.sampler = trace_sampler_type::naive;
+    cases.push_back({k >= 2, params});
+  }
+  for (auto& [sky, params] : cases) {
+    auto& scene = sky ? textured : constant;
+    auto  off   = render_aovs(scene, params);
+    auto  with  = params;
+    with.aovs   = true;
+    auto on     = render_aovs(scene, with);
+    EXPECT_TRUE(off.aov_sums.empty());
+    EXPECT_TRUE(off.layers.empty());
+    EXPECT_EQ(on.aov_sums.size(), on.sums.size() * trace_aov_sums);
+    EXPECT_TRUE(on.sums == off.sums) << "split " << params.split << " sampler "
+                                     << (int)params.sampler << " textured " << sky;
+    EXPECT_EQ(on.rays, off.rays);
+  }
 }

@@ -1314,15 +1314,12 @@ static bool encode_with_oiio(const std::string& filename, const std::string& wha
   return true;
 }
 
-// Encodes an image in memory: the bytes then go to disk through
-// save_binary, which checks the write (OpenImageIO does not report a failed
-// write of some formats, and libjpeg ends the program on one).
-static bool encode_image(const std::string& filename, const texture_data& image,
-    std::string& data, std::string& error, float exposure) {
-
-  auto extension = path_extension(filename);
+// Checks that an image can be saved: a known extension, pixels for its size,
+// all finite.
+static bool check_image_to_save(
+    const std::string& filename, const texture_data& image, std::string& error) {
   if (!is_image_filename(filename)) {
-    error = filename + ": unknown image extension \"" + extension +
+    error = filename + ": unknown image extension \"" + path_extension(filename) +
             "\" (use exr, hdr, pfm, png or jpg)";
     return false;
   }
@@ -1341,7 +1338,16 @@ static bool encode_image(const std::string& filename, const texture_data& image,
       return false;
     }
   }
+  return true;
+}
 
+// Encodes an image in memory: the bytes then go to disk through
+// save_binary, which checks the write (OpenImageIO does not report a failed
+// write of some formats, and libjpeg ends the program on one).
+static bool encode_image(const std::string& filename, const texture_data& image,
+    std::string& data, std::string& error, float exposure) {
+  if (!check_image_to_save(filename, image, error)) return false;
+  auto extension = path_extension(filename);
   if (extension == ".pfm") return encode_pfm(image, data), true;
   if (is_linear_extension(extension)) {
     auto spec = OIIO::ImageSpec(image.width, image.height, 3, OIIO::TypeDesc::FLOAT);
@@ -1373,9 +1379,8 @@ bool save_image_layers(const std::string& filename, const texture_data& image,
     error = filename + ": image layers are saved in OpenEXR only: use a name ending in .exr";
     return false;
   }
-  // The RGB part's checks (size, finite pixels) are encode_image's.
-  auto data = std::string{};
-  if (!encode_image(filename, image, data, error, 0)) return false;
+  if (!check_image_to_save(filename, image, error)) return false;
+  auto data     = std::string{};
   auto pixels   = image.pixels.size();
   auto channels = 3;
   auto spec     = OIIO::ImageSpec(image.width, image.height, 3, OIIO::TypeDesc::FLOAT);

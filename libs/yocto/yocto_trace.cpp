@@ -455,6 +455,9 @@ static vec3f trace_path(const trace_walk& walk, const ray3f& camera_ray,
     aov->hair    = point.type == material_type::hair;
     aov->albedo  = glm::clamp(eval_albedo(point, -camera_ray.d), 0.0f, 1.0f);
     aov->normal  = point.normal;
+    // A fibre seen end on has no side facing the camera: its end cap does.
+    if (point.fiber && !(dot(point.normal, -camera_ray.d) > 1e-6f))
+      aov->normal = dot(point.tangent, -camera_ray.d) >= 0 ? point.tangent : -point.tangent;
     aov->tangent = point.fiber ? point.tangent : point.normal;
   }
   if (params.bounces < 1 || scatters_nothing(point)) return radiance;

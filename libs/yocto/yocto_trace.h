@@ -183,12 +183,10 @@ texture_data get_image(int width, int height, const std::vector<fixed_sum3>& sum
 //   hit's h); matte: its colour; glossy: colour (1 - F) + F at the outgoing
 //   angle; 0 where the ray escapes (OIDN's aux image for the denoiser);
 // - normal: the first hit's shading normal, facing the camera (fibres: the
-//   round fibre's normal at h); 0 where the ray escapes;
+//   round fibre's normal at h; a fibre seen end on, its tangent towards the
+//   camera, the end cap's); 0 where the ray escapes;
 // - tangent: fibres: the curve's tangent, root to tip (the direction its
 //   control points run); surfaces: the normal; 0 where the ray escapes;
-// - depth: the distance to the first hit, averaged over the samples that hit
-//   (0 where none does); coverage: the fraction of samples whose first hit
-//   is hair;
 // - hair_R, hair_TT, hair_TRT, hair_TRRT: the radiance of the paths by the
 //   lobe p of their first hair scattering: the light sampled there split by
 //   the lobes' terms (eval_hair_scattering_lobes), the rest of the path by
@@ -197,15 +195,18 @@ texture_data get_image(int width, int height, const std::vector<fixed_sum3>& sum
 //   the radiance of the paths that scatter at hair (all but what the camera
 //   sees directly and what paths gather before reaching hair), and each is
 //   its lobe's share in expectation. Dropped (NaN) samples add no lobes;
-//   clamped ones add them clamped by the same factor.
+//   clamped ones add them clamped by the same factor;
+// - depth: the distance to the first hit, averaged over the samples that hit
+//   (0 where none does); coverage: the fraction of samples whose first hit
+//   is hair.
 inline constexpr int trace_aov_sums = 8;  // fixed_sum3 a pixel
 
 // Bytes of the AOV sums and layers of a render with params.aovs (0 without).
 double trace_aov_bytes(const scene_data& scene, const trace_params& params);
 
 // The AOV layers from sums of `samples` samples a pixel (trace_aov_sums a
-// pixel): albedo (R, G, B), normal (X, Y, Z), tangent (X, Y, Z), depth (Z),
-// coverage (Y), hair_R, hair_TT, hair_TRT, hair_TRRT (R, G, B).
+// pixel): albedo (R, G, B), normal (X, Y, Z), tangent (X, Y, Z), hair_R,
+// hair_TT, hair_TRT, hair_TRRT (R, G, B), depth (Z), coverage (Y).
 std::vector<image_layer> get_aov_layers(int width, int height,
     const std::vector<fixed_sum3>& aov_sums, int samples);
 
