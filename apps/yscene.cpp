@@ -468,8 +468,13 @@ static int run_render(const render_options& options, trace_params params,
       // Saving is not rendering: its time is left out of the figures.
       auto save_start = std::chrono::steady_clock::now();
       auto filename   = checkpoint_filename(options.output, state.samples);
-      if (!save_image(filename, get_image(state), error, options.exposure))
-        return print_error(error);
+      auto saved = params.aovs
+                       ? save_image_layers(filename, get_image(state),
+                             get_aov_layers(state.width, state.height, state.aov_sums,
+                                 state.samples),
+                             error)
+                       : save_image(filename, get_image(state), error, options.exposure);
+      if (!saved) return print_error(error);
       std::printf("checkpoint spp=%d seconds=%.6f cpu_seconds=%.6f rays=%lld file=%s\n",
           state.samples, elapsed, cpu_seconds() - render_cpu, (long long)state.rays.load(),
           filename.c_str());
