@@ -79,13 +79,6 @@ static std::string format_count(double count) {
   return buffer;
 }
 
-// A number as printf's %g writes it.
-static std::string format_number(float value) {
-  char buffer[32];
-  std::snprintf(buffer, sizeof(buffer), "%g", value);
-  return buffer;
-}
-
 // The enum value of a name from its names table (the command line has
 // checked that the name is in it).
 template <typename Enum, size_t size>
@@ -933,12 +926,8 @@ static int run_info(const info_options& options) {
         if (parameter.group == hair_parameter_group::variation &&
             !is_hair_parameter_set(hair, parameter))
           continue;
-        auto value = get_hair_parameter(hair, parameter);
         values += std::string(", ") + parameter.name + " " +
-                  (parameter.kind == hair_parameter_kind::number
-                          ? format_number(value.x)
-                          : "[" + format_number(value.x) + " " + format_number(value.y) +
-                                " " + format_number(value.z) + "]") +
+                  format_hair_parameter_value(parameter, get_hair_parameter(hair, parameter)) +
                   (parameter.unit[0] != 0 ? std::string(" ") + parameter.unit : "");
       }
       std::printf("material %s: hair, sigma_a [%g %g %g] %s%s\n", name.c_str(), used.sigma_a.x,
@@ -1025,12 +1014,8 @@ static void add_hair_parameter_option(
   std::replace(name.begin(), name.end(), '_', '-');
   auto range = format_hair_parameter_range(parameter);
   auto help  = std::string(parameter.doc) + " (" + range;
-  if (!parameter.has && parameter.kind == hair_parameter_kind::number)
-    help += ", default " + format_number(parameter.default_value.x);
-  if (!parameter.has && parameter.kind == hair_parameter_kind::rgb)
-    help += ", default " + format_number(parameter.default_value.x) + " " +
-            format_number(parameter.default_value.y) + " " +
-            format_number(parameter.default_value.z);
+  if (!parameter.has)
+    help += ", default " + format_hair_parameter_value(parameter, parameter.default_value);
   auto in_range = [&parameter, range](std::string& text) {
     auto end   = (char*)nullptr;
     auto value = std::strtof(text.c_str(), &end);

@@ -406,7 +406,7 @@ TEST(cli, info_prints_cameras_materials_and_lights) {
   EXPECT_NE(text.find("from melanin (eumelanin 0.3, pheomelanin 0)"), std::string::npos) << text;
   EXPECT_NE(text.find("from color [0.8 0.4 0.2]"), std::string::npos) << text;
   EXPECT_NE(text.find("material given: hair, sigma_a [0.1 0.2 0.3] given, beta_m 0.3, "
-                      "beta_n 0.3, alpha 3 deg, eta 1.6"),
+                      "beta_n 0.3, alpha 3 deg, eta 1.6\n"),
       std::string::npos) << text;
   EXPECT_NE(text.find("environment sky: emission [1 1 1]"), std::string::npos) << text;
 
@@ -433,6 +433,173 @@ TEST(cli, info_prints_cameras_materials_and_lights) {
   EXPECT_NEAR(materials[3]["sigma_a"][2].get<double>(), 0.3, 1e-7);
   EXPECT_NEAR(materials[3]["eta"].get<double>(), 1.6, 1e-6);
   EXPECT_EQ(json["environments"][0]["emission"], nlohmann::json::array({1, 1, 1}));
+  fs::remove_all(dir);
+}
+
+// The value info --json gives a parameter: a number, r g b, or null.
+static nlohmann::json info_value(const hair_parameter& parameter, const hair_material& hair) {
+  if (parameter.has && !(hair.*parameter.has)) return nullptr;
+  auto value = get_hair_parameter(hair, parameter);
+  if (parameter.kind == hair_parameter_kind::number) return value.x;
+  return nlohmann::json::array({value.x, value.y, value.z});
+}
+
+// info prints the variation parameters a material sets (in the text, after
+// the others; a material without variation prints as before) and --json
+// prints every parameter of the table. The scenes come from yscene hair.
+TEST(cli, info_prints_every_hair_parameter) {
+  auto dir     = make_test_dir("info-hair-parameters");
+  auto plain   = (dir / "plain" / "hair.json").string();
+  auto varying = (dir / "varying" / "hair.json").string();
+  ASSERT_EQ(run_yscene("hair -n 10 -o " + plain).status, 0);
+  auto result = run_yscene(
+      "hair -n 10 --eta 1.6 --random-melanin 0.3 --random-roughness 0.25 --tip-eumelanin 0.2 "
+      "--tip-pheomelanin 1.5 --tip-color 0.9 0.8 0.7 --tip-sigma-a 0.05 0.1 0.2 --tip-start 0.4 "
+      "--tint 1 0.6 0.5 -o " + varying);
+  ASSERT_EQ(result.status, 0) << result.output;
+
+  result = run_yscene("info " + plain);
+  ASSERT_EQ(result.status, 0) << result.output;
+  EXPECT_NE(result.output.find("material hair: hair, sigma_a [0.5447 0.9061 1.781] from "
+                               "melanin (eumelanin 1.3, pheomelanin 0), beta_m 0.3, beta_n "
+                               "0.3, alpha 2 deg, eta 1.55\n"),
+      std::string::npos)
+      << result.output;
+  result = run_yscene("info " + varying);
+  ASSERT_EQ(result.status, 0) << result.output;
+  EXPECT_NE(result.output.find("beta_m 0.3, beta_n 0.3, alpha 2 deg, eta 1.6, random_melanin "
+                               "0.3, random_roughness 0.25, tip_eumelanin 0.2, tip_pheomelanin "
+                               "1.5, tip_color [0.9 0.8 0.7], tip_sigma_a [0.05 0.1 0.2], "
+                               "tip_start 0.4, tint [1 0.6 0.5]\n"),
+      std::string::npos)
+      << result.output;
+
+  for (auto& filename : {plain, varying}) {
+    auto scene = scene_data{};
+    auto error = std::string{};
+    ASSERT_TRUE(load_scene(filename, scene, error)) << error;
+    auto& hair = scene.materials[0].hair;
+    result     = run_yscene("info --json " + filename);
+    ASSERT_EQ(result.status, 0) << result.output;
+    auto json = nlohmann::json::parse(result.output, nullptr, false);
+    ASSERT_FALSE(json.is_discarded()) << result.output;
+    auto& item = json["materials"][0];
+    EXPECT_EQ(item["type"], "hair");
+    for (auto& parameter : hair_parameters) {
+      ASSERT_TRUE(item.contains(parameter.name)) << parameter.name;
+      // sigma_a is the absorption the model uses (here from melanin).
+      if (std::string(parameter.name) == "sigma_a") continue;
+      auto  expected = info_value(parameter, hair);
+      auto& value    = item[parameter.name];
+      ASSERT_EQ(value.type(), expected.type()) << parameter.name << ": " << value;
+      auto count = expected.is_array() ? 3 : expected.is_null() ? 0 : 1;
+      for (auto c = 0; c < count; c++)
+        EXPECT_EQ((count == 3 ? value[c] : value).get<float>(),
+            (count == 3 ? expected[c] : expected).get<float>())
+            << parameter.name;
+    }
+    EXPECT_EQ(item["sigma_a_from"], "melanin");
+  }
+  fs::remove_all(dir);
+}
+
+// yscene hair has an option for every parameter of the table, and the
+// scene it writes carries the values given.
+TEST(cli, hair_options_write_every_hair_parameter) {
+  auto dir  = make_test_dir("hair-parameters");
+  auto help = run_yscene("hair --help").output;
+  for (auto& parameter : hair_parameters) {
+    auto option = "--" + std::string(parameter.name);
+    std::replace(option.begin(), option.end(), '_', '-');
+    EXPECT_NE(help.find(option + " "), std::string::npos) << option << "\n" << help;
+  }
+
+  // The example, then every option with a value other than its default.
+  auto json   = (dir / "example" / "hair.json").string();
+  auto result = run_yscene("hair --style straight -n 10 --random-melanin 0.3 "
+                           "--tip-eumelanin 0.2 --tip-color 0.9 0.8 0.7 --tint 1 0.6 0.5 -o " +
+                           json);
+  ASSERT_EQ(result.status, 0) << result.output;
+  auto scene = scene_data{};
+  auto error = std::string{};
+  ASSERT_TRUE(load_scene(json, scene, error)) << error;
+  auto& example = scene.materials[0].hair;
+  EXPECT_EQ(example.random_melanin, 0.3f);
+  EXPECT_TRUE(example.has_tip_eumelanin);
+  EXPECT_EQ(example.tip_eumelanin, 0.2f);
+  EXPECT_TRUE(example.has_tip_color);
+  EXPECT_EQ(example.tip_color, (vec3f{0.9f, 0.8f, 0.7f}));
+  EXPECT_EQ(example.tint, (vec3f{1, 0.6f, 0.5f}));
+  EXPECT_FALSE(example.has_tip_pheomelanin || example.has_tip_sigma_a);
+  EXPECT_EQ(example.random_roughness, 0);
+  auto text = nlohmann::json::parse(std::ifstream(json));
+  for (auto key : {"random_melanin", "tip_eumelanin", "tip_color", "tint"})
+    EXPECT_TRUE(text["materials"][0].contains(key)) << key;
+  for (auto key : {"random_roughness", "tip_pheomelanin", "tip_sigma_a", "tip_start"})
+    EXPECT_FALSE(text["materials"][0].contains(key)) << key;
+
+  auto arguments = std::string{"hair --style straight -n 10"};
+  auto expected  = hair_material{};
+  for (auto& parameter : hair_parameters) {
+    auto option = "--" + std::string(parameter.name);
+    std::replace(option.begin(), option.end(), '_', '-');
+    auto value = parameter.min + 0.25f;  // valid and not a default
+    EXPECT_NE(vec3f{value}, parameter.default_value) << parameter.name;
+    auto number = std::to_string(value);
+    arguments += " " + option + " " + number;
+    if (parameter.kind == hair_parameter_kind::rgb) arguments += " " + number + " " + number;
+    set_hair_parameter(expected, parameter, vec3f{value});
+  }
+  json   = (dir / "every" / "hair.json").string();
+  result = run_yscene(arguments + " -o " + json);
+  ASSERT_EQ(result.status, 0) << arguments << "\n" << result.output;
+  ASSERT_TRUE(load_scene(json, scene, error)) << error;
+  for (auto& parameter : hair_parameters) {
+    EXPECT_EQ(get_hair_parameter(scene.materials[0].hair, parameter),
+        get_hair_parameter(expected, parameter))
+        << parameter.name;
+    if (parameter.has) EXPECT_TRUE(scene.materials[0].hair.*parameter.has) << parameter.name;
+  }
+
+  // Without variation options, the material has no variation key.
+  json   = (dir / "plain" / "hair.json").string();
+  result = run_yscene("hair --style straight -n 10 --eumelanin 2 -o " + json);
+  ASSERT_EQ(result.status, 0) << result.output;
+  text = nlohmann::json::parse(std::ifstream(json));
+  for (auto& parameter : hair_parameters)
+    if (parameter.group == hair_parameter_group::variation)
+      EXPECT_FALSE(text["materials"][0].contains(parameter.name)) << parameter.name;
+  fs::remove_all(dir);
+}
+
+// Each option holds its value to the table's range (either end) and rgb
+// options take three numbers; an error names the option and the range.
+TEST(cli, hair_options_check_the_table_ranges) {
+  auto dir    = make_test_dir("hair-ranges");
+  auto output = dir / "hair.json";
+  auto expect_refused = [&](const std::string& arguments, const std::string& part) {
+    auto result = run_yscene("hair -n 10 " + arguments + " -o " + output.string());
+    EXPECT_EQ(result.status, 1) << arguments << "\n" << result.output;
+    EXPECT_EQ(result.output.rfind(arguments.substr(0, arguments.find(' ')) + ": ", 0), 0u)
+        << arguments << "\n" << result.output;
+    EXPECT_NE(result.output.find(part), std::string::npos) << arguments << "\n" << result.output;
+    EXPECT_FALSE(fs::exists(output)) << arguments;
+  };
+  for (auto& parameter : hair_parameters) {
+    auto option = "--" + std::string(parameter.name);
+    std::replace(option.begin(), option.end(), '_', '-');
+    auto rgb  = parameter.kind == hair_parameter_kind::rgb;
+    auto bads = std::vector<float>{parameter.min_open ? parameter.min : parameter.min - 1};
+    if (parameter.max != flt_max)
+      bads.push_back(parameter.max_open ? parameter.max : parameter.max + 1);
+    for (auto bad : bads) {
+      auto text = std::to_string(bad), min = std::to_string(parameter.min);
+      expect_refused(option + " " + (rgb ? min + " " + text + " " + min : text),
+          format_hair_parameter_range(parameter));
+    }
+    if (rgb) expect_refused(option + " 0.5 0.5", "3 required");
+  }
+  expect_refused("--eta dark", "expected a number");
   fs::remove_all(dir);
 }
 

@@ -814,6 +814,66 @@ TEST(pbrtio, bad_input_names_file_line_and_directive) {
   expect_error(dir, "WorldBegin\nMaterial \"hair\" \"float beta_m\" 2\n", {"beta_m"});
 }
 
+// pbrt's hair parameters are the rows of hair_parameters with a pbrt name,
+// read under that name (or pbrt-v4's) and held to the row's range: the ends
+// of a closed range load, a value past either end is an error naming the
+// file, the line, the directive and the parameter. The variation keys are
+// not pbrt's: they are ignored with a warning.
+TEST(pbrtio, hair_parameters_follow_the_table) {
+  auto dir = temp_dir{};
+  // A hair material with one parameter (a number, or r g b all equal to
+  // it) on line 3, then a strand.
+  auto scene_text = [](const hair_parameter& parameter, const char* name, float value) {
+    auto text = std::to_string(value);
+    auto declaration =
+        parameter.kind == hair_parameter_kind::number
+            ? "\"float " + std::string(name) + "\" " + text
+            : "\"rgb " + std::string(name) + "\" [ " + text + " " + text + " " + text + " ]";
+    return "WorldBegin\n\nMaterial \"hair\" " + declaration +
+           "\nShape \"curve\" \"point3 P\" [0 0 0 0 0 1 0 0 2 0 0 3] \"float width\" .1\n";
+  };
+  auto checked = 0;
+  for (auto& parameter : hair_parameters) {
+    if (parameter.pbrt[0] == 0) continue;
+    checked++;
+    for (auto name : {parameter.pbrt, parameter.pbrt_alias}) {
+      if (name[0] == 0) continue;
+      auto scene    = scene_data{};
+      auto error    = std::string{};
+      auto warnings = std::vector<std::string>{};
+      // The ends of the range (flt_max: a large value) are valid.
+      for (auto value : {parameter.min, parameter.max == flt_max ? 1e6f : parameter.max}) {
+        auto text = scene_text(parameter, name, value);
+        ASSERT_TRUE(load_text(dir, text, scene, error, &warnings)) << text << "\n" << error;
+        EXPECT_EQ(get_hair_parameter(scene.materials[0].hair, parameter), vec3f{value}) << text;
+        EXPECT_FALSE(any_contains(warnings, name)) << text;
+      }
+      auto outside = std::vector<float>{parameter.min - 1};
+      if (parameter.max != flt_max) outside.push_back(parameter.max + 1);
+      for (auto value : outside)
+        expect_error(dir, scene_text(parameter, name, value),
+            {"scene.pbrt:3:", "Material \"hair\"", name,
+                "must be " + format_hair_parameter_range(parameter)});
+    }
+  }
+  EXPECT_GE(checked, 8);  // sigma_a, color, eumelanin, pheomelanin, beta_m, beta_n, alpha, eta
+  for (auto& parameter : hair_parameters) {
+    if (parameter.pbrt[0] != 0) continue;
+    auto scene    = scene_data{};
+    auto error    = std::string{};
+    auto warnings = std::vector<std::string>{};
+    auto text     = scene_text(parameter, parameter.name, parameter.min + 0.5f);
+    ASSERT_TRUE(load_text(dir, text, scene, error, &warnings)) << error;
+    for (auto& other : hair_parameters)
+      EXPECT_EQ(get_hair_parameter(scene.materials[0].hair, other),
+          get_hair_parameter(hair_material{}, other))
+          << other.name;
+    EXPECT_TRUE(any_contains(warnings, "ignoring parameter") &&
+                any_contains(warnings, parameter.name))
+        << text;
+  }
+}
+
 TEST(pbrtio, hair_material_on_a_surface_is_an_error_at_the_shape) {
   auto dir = temp_dir{};
   write_text(dir / "tri.ply",

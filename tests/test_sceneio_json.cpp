@@ -6,6 +6,8 @@
 
 #include <gtest/gtest.h>
 
+#include <charconv>
+
 #include <nlohmann/json.hpp>
 
 #include "test_sceneio.h"
@@ -113,17 +115,13 @@ scene_data make_test_scene() {
   return scene;
 }
 
+// Every parameter of the table, and its has_ flag.
 void expect_same_hair(const hair_material& a, const hair_material& b) {
-  EXPECT_EQ(a.sigma_a, b.sigma_a);
-  EXPECT_EQ(a.color, b.color);
-  EXPECT_EQ(a.eumelanin, b.eumelanin);
-  EXPECT_EQ(a.pheomelanin, b.pheomelanin);
-  EXPECT_EQ(a.beta_m, b.beta_m);
-  EXPECT_EQ(a.beta_n, b.beta_n);
-  EXPECT_EQ(a.alpha, b.alpha);
-  EXPECT_EQ(a.eta, b.eta);
-  EXPECT_EQ(a.has_sigma_a, b.has_sigma_a);
-  EXPECT_EQ(a.has_color, b.has_color);
+  for (auto& parameter : hair_parameters) {
+    EXPECT_EQ(get_hair_parameter(a, parameter), get_hair_parameter(b, parameter))
+        << parameter.name;
+    if (parameter.has) EXPECT_EQ(a.*parameter.has, b.*parameter.has) << parameter.name;
+  }
 }
 
 // Field by field, so that a failure says which field.
@@ -790,4 +788,196 @@ TEST(json, rejects_bad_input_naming_file_and_place) {
   rejects_bad_hair_values();
   rejects_missing_files_and_hair_on_triangles();
   failed_saves_leave_nothing_behind();
+}
+
+// -----------------------------------------------------------------------------
+// HAIR PARAMETERS: the table's keys in files, errors and fingerprints
+// -----------------------------------------------------------------------------
+namespace {
+
+// A hair material that sets every variation parameter of the table.
+hair_material make_varying_hair() {
+  auto hair                = hair_material{};
+  hair.eumelanin           = 0.8f;
+  hair.pheomelanin         = 0.4f;
+  hair.random_melanin      = 0.3f;
+  hair.random_roughness    = 0.25f;
+  hair.tip_eumelanin       = 0.2f;
+  hair.has_tip_eumelanin   = true;
+  hair.tip_pheomelanin     = 1.5f;
+  hair.has_tip_pheomelanin = true;
+  hair.tip_color           = {0.9f, 0.8f, 0.7f};
+  hair.has_tip_color       = true;
+  hair.tip_sigma_a         = {0.05f, 0.1f, 0.2f};
+  hair.has_tip_sigma_a     = true;
+  hair.tip_start           = 0.4f;
+  hair.tint                = {1, 0.6f, 0.5f};
+  return hair;
+}
+
+// A valid value of the parameter other than `current`.
+vec3f other_hair_value(const hair_parameter& parameter, const vec3f& current) {
+  auto candidates = {parameter.min, parameter.min + 0.25f, parameter.min + 0.5f,
+      parameter.min + 1, parameter.min + 2};
+  for (auto candidate : candidates)
+    if (is_hair_parameter_valid(parameter, vec3f{candidate}) && vec3f{candidate} != current)
+      return vec3f{candidate};
+  ADD_FAILURE() << "no other valid value of " << parameter.name;
+  return current;
+}
+
+// The json text of a parameter's value, each number in its shortest form.
+std::string json_value(const hair_parameter& parameter, const vec3f& value) {
+  auto number = [](float x) {
+    char buffer[32];
+    return std::string(buffer, std::to_chars(buffer, buffer + sizeof(buffer), x).ptr);
+  };
+  if (parameter.kind == hair_parameter_kind::number) return number(value.x);
+  return "[" + number(value.x) + ", " + number(value.y) + ", " + number(value.z) + "]";
+}
+
+}  // namespace
+
+TEST(json, every_hair_parameter_round_trips) {
+  // The material below leaves no variation parameter at its default.
+  auto varying = make_varying_hair();
+  for (auto& parameter : hair_parameters)
+    if (parameter.group == hair_parameter_group::variation)
+      EXPECT_TRUE(is_hair_parameter_set(varying, parameter)) << parameter.name;
+
+  // Saved and loaded: the same material, every key written.
+  auto scene              = make_test_scene();
+  scene.materials[4].hair = varying;
+  expect_round_trip(scene, "hair-parameters", false);
+  auto dir   = scratch_directory("hair-parameters-keys");
+  auto error = std::string{};
+  ASSERT_TRUE(save_scene(dir.file("scene.json"), scene, error)) << error;
+  auto js = nlohmann::json::parse(read_file(dir.file("scene.json")));
+  for (auto& parameter : hair_parameters) {
+    if (parameter.group != hair_parameter_group::variation) continue;
+    ASSERT_TRUE(js["materials"][4].contains(parameter.name)) << parameter.name;
+    EXPECT_EQ(js["materials"][4][parameter.name],
+        nlohmann::json::parse(json_value(parameter, get_hair_parameter(varying, parameter))))
+        << parameter.name;
+    // A material without variation writes none of its keys: files stay
+    // as they were before these keys existed.
+    EXPECT_FALSE(js["materials"][3].contains(parameter.name)) << parameter.name;
+  }
+  // name, type, emission, sigma_a, color, eumelanin, pheomelanin, beta_m,
+  // beta_n, alpha, eta: what files had before the variation keys.
+  EXPECT_EQ(js["materials"][3].size(), 11u) << js["materials"][3].dump();
+
+  // Written by hand, loaded, saved, loaded: the same material each time.
+  auto text = std::string{R"({"name": "m", "type": "hair")"};
+  for (auto& parameter : hair_parameters)
+    if (parameter.group == hair_parameter_group::variation)
+      text += ", \"" + std::string(parameter.name) +
+              "\": " + json_value(parameter, get_hair_parameter(varying, parameter));
+  text += R"(, "eumelanin": 0.8, "pheomelanin": 0.4})";
+  auto material = material_data{};
+  auto warnings = std::vector<std::string>{};
+  ASSERT_TRUE(load_one_material(dir.file("hand"), text, material, warnings, error)) << error;
+  EXPECT_TRUE(warnings.empty()) << warnings.front();
+  expect_same_hair(material.hair, varying);
+  // Each key lands in the field of its name.
+  auto& hand = material.hair;
+  EXPECT_EQ(hand.random_melanin, 0.3f);
+  EXPECT_EQ(hand.random_roughness, 0.25f);
+  EXPECT_TRUE(hand.has_tip_eumelanin && hand.tip_eumelanin == 0.2f);
+  EXPECT_TRUE(hand.has_tip_pheomelanin && hand.tip_pheomelanin == 1.5f);
+  EXPECT_TRUE(hand.has_tip_color && hand.tip_color == (vec3f{0.9f, 0.8f, 0.7f}));
+  EXPECT_TRUE(hand.has_tip_sigma_a && hand.tip_sigma_a == (vec3f{0.05f, 0.1f, 0.2f}));
+  EXPECT_EQ(hand.tip_start, 0.4f);
+  EXPECT_EQ(hand.tint, (vec3f{1, 0.6f, 0.5f}));
+  auto loaded = scene_data{};
+  ASSERT_TRUE(load_scene(dir.file("hand/scene.json"), loaded, error)) << error;
+  std::filesystem::create_directories(dir.file("again"));
+  ASSERT_TRUE(save_scene(dir.file("again/scene.json"), loaded, error)) << error;
+  auto again = scene_data{};
+  ASSERT_TRUE(load_scene(dir.file("again/scene.json"), again, error)) << error;
+  expect_same_hair(again.materials[0].hair, varying);
+}
+
+TEST(json, hair_parameters_out_of_range_or_of_the_wrong_type_are_errors) {
+  auto dir      = scratch_directory("hair-parameters-errors");
+  auto material = material_data{};
+  auto warnings = std::vector<std::string>{};
+  auto filename = dir.file("scene.json");
+  for (auto& parameter : hair_parameters) {
+    auto key  = "\"" + std::string(parameter.name) + "\"";
+    auto rgb  = parameter.kind == hair_parameter_kind::rgb;
+    auto bads = std::vector<std::pair<std::string, std::string>>{};  // value, error part
+    auto outside = std::vector<float>{parameter.min_open ? parameter.min : parameter.min - 1};
+    if (parameter.max != flt_max)
+      outside.push_back(parameter.max_open ? parameter.max : parameter.max + 1);
+    for (auto value : outside) {
+      auto text = nlohmann::json(value).dump();
+      auto min  = nlohmann::json(parameter.min).dump();
+      bads.push_back({rgb ? "[" + min + ", " + text + ", " + min + "]" : text, "got"});
+    }
+    bads.push_back({rgb ? "0.5" : "[0.5]", "expected"});
+    bads.push_back({rgb ? "[0.5, 0.5]" : "\"dark\"", "expected"});
+    bads.push_back({rgb ? "[0.5, \"dark\", 0.5]" : "true", "expected"});
+    for (auto& [value, part] : bads) {
+      auto text  = R"({"name": "m", "type": "hair", )" + key + ": " + value + "}";
+      auto error = std::string{};
+      EXPECT_FALSE(load_one_material(dir.path, text, material, warnings, error)) << text;
+      for (auto expected : {filename, std::string("material \"m\""), key, std::string(part)})
+        EXPECT_TRUE(contains(error, expected)) << text << "\n" << error << "\nlacks " << expected;
+      EXPECT_EQ(error.find('\n'), std::string::npos) << error;
+    }
+  }
+  // The range each error states is the table's (colour's lower bound is
+  // every material's colour's, checked before the type is known).
+  auto error = std::string{};
+  EXPECT_FALSE(load_one_material(
+      dir.path, R"({"type": "hair", "tip_start": 1})", material, warnings, error));
+  EXPECT_TRUE(contains(error, "\"tip_start\": expected a number in [0, 1), got 1")) << error;
+  EXPECT_FALSE(load_one_material(
+      dir.path, R"({"type": "hair", "tint": [1, 1.5, 1]})", material, warnings, error));
+  EXPECT_TRUE(contains(error, "\"tint\": expected numbers in [0, 1], got 1.5")) << error;
+  EXPECT_FALSE(load_one_material(
+      dir.path, R"({"type": "hair", "eta": 10.5})", material, warnings, error));
+  EXPECT_TRUE(contains(error, "\"eta\": expected a number in [1, 10], got 10.5")) << error;
+  // The ends of closed ranges are valid.
+  EXPECT_TRUE(load_one_material(dir.path,
+      R"({"type": "hair", "eta": 1, "random_melanin": 1, "tip_start": 0, "tint": [0, 0, 0]})",
+      material, warnings, error))
+      << error;
+  EXPECT_TRUE(load_one_material(dir.path, R"({"type": "hair", "eta": 10, "alpha": -90})",
+      material, warnings, error))
+      << error;
+}
+
+// A material that varies nothing keeps the fingerprint it had before the
+// variation parameters existed (the values below are what fingerprint_scene
+// gave then); any parameter of the table changed alone changes it.
+TEST(json, fingerprint_follows_every_hair_parameter) {
+  EXPECT_EQ(fingerprint_scene(make_test_scene()), 1981355987844060304ull);
+  auto dir = scratch_directory("hair-fingerprint");
+  write_fixture_files(dir.path);
+  auto error = std::string{};
+  auto scene = scene_data{};
+  write_file(dir.file("mixed.json"), layout_mixed_json);
+  ASSERT_TRUE(load_scene(dir.file("mixed.json"), scene, error)) << error;
+  EXPECT_EQ(fingerprint_scene(scene), 4198811764396233581ull);
+  write_file(dir.file("40.json"), layout_40_json);
+  ASSERT_TRUE(load_scene(dir.file("40.json"), scene, error)) << error;
+  EXPECT_EQ(fingerprint_scene(scene), 4029181044731584112ull);
+
+  for (auto& hair : {hair_material{}, make_varying_hair()}) {
+    auto base = make_test_scene();
+    base.materials[4].hair = hair;
+    auto fingerprint       = fingerprint_scene(base);
+    for (auto& parameter : hair_parameters) {
+      auto changed = base;
+      set_hair_parameter(changed.materials[4].hair, parameter,
+          other_hair_value(parameter, get_hair_parameter(hair, parameter)));
+      EXPECT_NE(fingerprint_scene(changed), fingerprint) << parameter.name;
+      if (!parameter.has) continue;
+      auto flagged = base;
+      flagged.materials[4].hair.*parameter.has = !(hair.*parameter.has);
+      EXPECT_NE(fingerprint_scene(flagged), fingerprint) << parameter.name << " flag";
+    }
+  }
 }

@@ -1202,15 +1202,11 @@ static material_data make_hair_material(pbrt_state& state) {
     auto& [parameter, param, value] = given[i];
     if (parameter->group == hair_parameter_group::pigment && pigment >= 0 && i != pigment)
       continue;
-    if (!is_hair_parameter_valid(*parameter, value)) {
-      char text[96];
-      if (parameter->kind == hair_parameter_kind::number)
-        std::snprintf(text, sizeof(text), "%g", value.x);
-      else std::snprintf(text, sizeof(text), "[%g %g %g]", value.x, value.y, value.z);
+    if (!is_hair_parameter_valid(*parameter, value))
       set_error(state, "parameter " + param_decl(*param) + " must be " +
-                           format_hair_parameter_range(*parameter) + ", got " + text,
+                           format_hair_parameter_range(*parameter) + ", got " +
+                           format_hair_parameter_value(*parameter, value),
           param->line);
-    }
     set_hair_parameter(material.hair, *parameter, value);
   }
   if (pigment < 0 && eumelanin >= 0 && pheomelanin < 0) material.hair.pheomelanin = 0;

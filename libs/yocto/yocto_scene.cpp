@@ -127,8 +127,9 @@ vec3f eval_environment(const scene_data& scene, const environment_data& environm
 // -----------------------------------------------------------------------------
 namespace yocto {
 
-// Each row reads its value through the pointer of its kind, and its default
-// is hair_material{}'s (a number's in every component).
+// Each row reads its value through the pointer of its kind, a field no
+// other row reads, and its default is hair_material{}'s (a number's in every
+// component).
 static constexpr bool hair_parameters_agree_with_hair_material() {
   constexpr auto defaults = hair_material{};
   for (auto& parameter : hair_parameters) {
@@ -137,11 +138,18 @@ static constexpr bool hair_parameters_agree_with_hair_material() {
       return false;
     auto value = number ? vec3f{defaults.*parameter.number} : defaults.*parameter.rgb;
     if (value != parameter.default_value) return false;
+    for (auto& other : hair_parameters) {
+      if (&other == &parameter) continue;
+      if ((number && other.number == parameter.number) ||
+          (!number && other.rgb == parameter.rgb) || (parameter.has && other.has == parameter.has))
+        return false;
+    }
   }
   return true;
 }
 static_assert(hair_parameters_agree_with_hair_material(),
-    "a row of hair_parameters disagrees with hair_material's kind or default");
+    "a row of hair_parameters disagrees with hair_material (kind, default) or reads "
+    "another row's field");
 
 const hair_parameter* find_hair_parameter(const std::string& key) {
   for (auto& parameter : hair_parameters)
@@ -188,17 +196,21 @@ std::string format_hair_parameter_range(const hair_parameter& parameter) {
   return buffer;
 }
 
+std::string format_hair_parameter_value(const hair_parameter& parameter, const vec3f& value) {
+  char text[96];
+  if (parameter.kind == hair_parameter_kind::number)
+    std::snprintf(text, sizeof(text), "%g", value.x);
+  else std::snprintf(text, sizeof(text), "[%g %g %g]", value.x, value.y, value.z);
+  return text;
+}
+
 bool check_hair_material(const hair_material& material, std::string& error) {
   for (auto& parameter : hair_parameters) {
     if (parameter.has && !(material.*parameter.has)) continue;
     auto value = get_hair_parameter(material, parameter);
     if (is_hair_parameter_valid(parameter, value)) continue;
-    char text[96];
-    if (parameter.kind == hair_parameter_kind::number)
-      std::snprintf(text, sizeof(text), "%g", value.x);
-    else std::snprintf(text, sizeof(text), "[%g %g %g]", value.x, value.y, value.z);
-    error = std::string(parameter.name) + " " + text + " is not " +
-            format_hair_parameter_range(parameter);
+    error = std::string(parameter.name) + " " + format_hair_parameter_value(parameter, value) +
+            " is not " + format_hair_parameter_range(parameter);
     return false;
   }
   return true;
@@ -273,6 +285,8 @@ uint64_t fingerprint_scene(const scene_data& scene) {
     hasher.add(shape.normals);
     hasher.add(shape.texcoords);
     hasher.add(shape.radius);
+    // Only when present: the fingerprints of shapes without colours stay.
+    if (!shape.colors.empty()) hasher.add(shape.colors);
   }
   for (auto& texture : scene.textures) {
     hasher.add_values(texture.width, texture.height);

@@ -145,9 +145,9 @@ namespace yocto {
 enum struct hair_parameter_kind { number, rgb };
 
 // What a parameter is about: the pigment (sigma_a, else color, else melanin),
-// the fiber's roughness, tilt and index, or variation across a groom (those
-// keys are new: files, `info` text and fingerprints of materials that leave
-// them at their defaults stay as they were before them).
+// the fiber's roughness, tilt and index, or variation across a groom. A
+// material that leaves every variation parameter at its default saves,
+// prints (`info` text) and fingerprints as if the group did not exist.
 enum struct hair_parameter_group { pigment, fiber, variation };
 
 // One row of hair_parameters. A value is read and written through the
@@ -256,6 +256,8 @@ bool is_hair_parameter_set(const hair_material& material, const hair_parameter& 
 bool is_hair_parameter_valid(const hair_parameter& parameter, const vec3f& value);
 // The range as text: "in [0, 1]", "in [0, 1)", ">= 0", "> 0".
 std::string format_hair_parameter_range(const hair_parameter& parameter);
+// A value as text, as printf's %g: "0.3", or "[1 0.6 0.5]" for rgb.
+std::string format_hair_parameter_value(const hair_parameter& parameter, const vec3f& value);
 
 // Checks every parameter a hair material uses (optional ones only if given)
 // against its range; false with "NAME VALUE is not RANGE" otherwise.
