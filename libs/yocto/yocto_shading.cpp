@@ -241,6 +241,12 @@ static vec3f sample_bsdfcos(const material_point& point, const vec3f& outgoing, 
   return reflect(outgoing, half);
 }
 
+std::array<vec3f, 4> eval_bsdfcos_lobes(
+    const material_point& point, const vec3f& outgoing, const vec3f& incoming) {
+  if (point.type != material_type::hair) return {};
+  return eval_hair_scattering_lobes(point.hair, outgoing, incoming);
+}
+
 bool bsdf_takes_more_numbers(const material_point& point) {
   return point.type == material_type::hair && point.hair_sampling.four_numbers;
 }

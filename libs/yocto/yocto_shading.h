@@ -13,6 +13,7 @@
 #ifndef YOCTO_SHADING_H_
 #define YOCTO_SHADING_H_
 
+#include <array>
 #include <utility>
 #include <vector>
 
@@ -131,6 +132,11 @@ struct bsdf_sample {
 };
 bsdf_sample sample_bsdf(const material_point& point, const vec3f& outgoing, float rnl,
     const vec2f& rn, const vec2f& more, bool needs_pdf);
+
+// Hair: eval_bsdfcos lobe by lobe (R, TT, TRT, TRRT and higher), which sum
+// to it; other materials have no lobes (zeros).
+std::array<vec3f, 4> eval_bsdfcos_lobes(
+    const material_point& point, const vec3f& outgoing, const vec3f& incoming);
 
 // Directional albedo for the outgoing direction: hair the model's own (sum
 // of A_p), matte its colour, glossy the Lambertian base under the coat plus

@@ -347,7 +347,7 @@ static void scatter_path(const trace_walk& walk, material_point point, ray3f ray
             if (!intersect_scene_bvh_any(bvh, shadow)) {
               radiance += contribution / survive;
               if (first_hair) {
-                auto terms = eval_hair_scattering_lobes(point.hair, outgoing, incoming);
+                auto terms = eval_bsdfcos_lobes(point, outgoing, incoming);
                 for (auto p = 0; p < 4; p++)
                   lobes[p] += weight * terms[p] * emission * (mis / pdf / survive);
               }
@@ -373,7 +373,7 @@ static void scatter_path(const trace_walk& walk, material_point point, ray3f ray
       if (sample.lobe >= 0) {
         lobe_shares[sample.lobe] = {1, 1, 1};
       } else {
-        auto terms = eval_hair_scattering_lobes(point.hair, outgoing, incoming);
+        auto terms = eval_bsdfcos_lobes(point, outgoing, incoming);
         for (auto p = 0; p < 4; p++)
           for (auto c = 0; c < 3; c++)
             lobe_shares[p][c] = sample.bsdfcos[c] > 0 ? terms[p][c] / sample.bsdfcos[c] : 0.0f;
