@@ -2149,6 +2149,7 @@ shape_data curves_to_lines(const shape_data& curves, int segments) {
   segments        = std::max(segments, 1);
   auto lines      = shape_data{};
   auto has_radius = curves.radius.size() == curves.positions.size();
+  auto has_colors = curves.colors.size() == curves.positions.size();
   auto num_vertices = (int)curves.positions.size();
   // Line vertex of each curve end point, so strands share their joints.
   auto end_vertex = std::vector<int>(curves.positions.size(), -1);
@@ -2158,6 +2159,10 @@ shape_data curves_to_lines(const shape_data& curves, int segments) {
     if (has_radius) {
       auto& r = curves.radius;
       lines.radius.push_back(eval_bezier(r[c.x], r[c.y], r[c.z], r[c.w], u));
+    }
+    if (has_colors) {
+      auto& k = curves.colors;
+      lines.colors.push_back(eval_bezier(k[c.x], k[c.y], k[c.z], k[c.w], u));
     }
     return (int)lines.positions.size() - 1;
   };
@@ -2396,11 +2401,13 @@ bool save_hair_model(const std::string& filename, const shape_data& shape, std::
     return false;
   }
   auto has_radius = shape.radius.size() == shape.positions.size();
+  auto has_colors = shape.colors.size() == shape.positions.size();
   auto header     = hair_header{};
   header.num_strands = (uint32_t)segments.size();
   header.num_points  = (uint32_t)vertices.size();
   header.flags       = hair_has_segments | hair_has_points |
-                 (has_radius ? (uint32_t)hair_has_thickness : 0u);
+                 (has_radius ? (uint32_t)hair_has_thickness : 0u) |
+                 (has_colors ? (uint32_t)hair_has_color : 0u);
   std::snprintf(header.info, sizeof(header.info), "yocto-hair");
   auto data = std::string((const char*)&header, sizeof(header));
   data.append((const char*)segments.data(), segments.size() * sizeof(uint16_t));
@@ -2410,6 +2417,10 @@ bool save_hair_model(const std::string& filename, const shape_data& shape, std::
       auto thickness = 2 * shape.radius[v];
       data.append((const char*)&thickness, 4);
     }
+  }
+  // The file's arrays in order: transparency (never written), then colours.
+  if (has_colors) {
+    for (auto v : vertices) data.append((const char*)&shape.colors[v], 12);
   }
   // save_text writes bytes as they are, through a temporary name.
   return save_text(filename, data, error);

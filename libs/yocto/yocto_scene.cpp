@@ -230,7 +230,8 @@ double shape_memory(const shape_data& shape) {
          (double)shape.positions.size() * sizeof(vec3f) +
          (double)shape.normals.size() * sizeof(vec3f) +
          (double)shape.texcoords.size() * sizeof(vec2f) +
-         (double)shape.radius.size() * sizeof(float);
+         (double)shape.radius.size() * sizeof(float) +
+         (double)shape.colors.size() * sizeof(vec3f);
 }
 
 // Scene values into a hash_stream.
@@ -509,6 +510,14 @@ bool validate_scene(const scene_data& scene, std::string& error) {
     if (!check_size(shape.normals.size(), "normals")) return false;
     if (!check_size(shape.texcoords.size(), "texcoords")) return false;
     if (!check_size(shape.radius.size(), "radius")) return false;
+    if (!check_size(shape.colors.size(), "colors")) return false;
+    for (auto v = 0; v < (int)shape.colors.size(); v++) {
+      auto& c = shape.colors[v];
+      if (!(isfinite(c) && min_component(c) >= 0 && max_component(c) <= 1)) {
+        error = name + ": vertex " + std::to_string(v) + ": color is not in [0, 1]";
+        return false;
+      }
+    }
     if (!check_elements(shape.triangles, nverts, name, "triangle", error)) return false;
     if (!check_elements(shape.lines, nverts, name, "line", error)) return false;
     if (!check_elements(shape.curves, nverts, name, "curve", error)) return false;
