@@ -70,8 +70,7 @@ material_point eval_material_point(const scene_data& scene, const shading_contex
     point.normal  = dot(surface.normal, -ray.d) >= 0 ? surface.normal : -surface.normal;
     point.gnormal = surface.gnormal;
   } else {
-    auto fiber = eval_fiber_point(scene, instance, element, uv.x,
-        ray, distance);
+    auto fiber = eval_fiber_point(scene, instance, element, uv.x, ray, distance);
     point.fiber    = true;
     point.position = fiber.position;
     point.axis     = fiber.axis;
@@ -82,19 +81,19 @@ material_point eval_material_point(const scene_data& scene, const shading_contex
       // A groom that varies: the material of this strand at this place
       // (the shape's colour there, the strand's variation), and of its
       // terms only those that vary are computed again.
-      auto hair    = material.hair;
-      auto segment = element;
-      auto t       = uv.x;
+      auto hair = material.hair;
+      auto t    = uv.x;  // along the segment
       if (!shape.colors.empty() && hair.has_color && !hair.has_sigma_a) {
-        auto ends  = shape.curves.empty() ? shape.lines[segment]
-                                          : vec2i{shape.curves[segment].x, shape.curves[segment].w};
+        auto ends  = shape.curves.empty()
+                         ? shape.lines[element]
+                         : vec2i{shape.curves[element].x, shape.curves[element].w};
         hair.color = shape.colors[ends.x] + (shape.colors[ends.y] - shape.colors[ends.x]) * t;
       }
       auto& strands = context.strands[instance.shape];
       if (!strands.strand.empty()) {
-        auto u = strands.u[segment].x + (strands.u[segment].y - strands.u[segment].x) * t;
+        auto u = strands.u[element].x + (strands.u[element].y - strands.u[element].x) * t;
         hair   = eval_hair_material_point(
-            hair, strands.random[strands.strand[segment]], std::clamp(u, 0.0f, 1.0f));
+            hair, strands.random[strands.strand[element]], std::clamp(u, 0.0f, 1.0f));
       }
       auto terms = context.hair[instance.material];
       if (material.hair.random_roughness != 0 || context.hair_sampling.per_hit) {
@@ -106,9 +105,10 @@ material_point eval_material_point(const scene_data& scene, const shading_contex
     } else if (material.type == material_type::hair) {
       // With the outgoing direction, so that the terms depending on it are
       // computed once for the three or four hair calls of this hit.
-      point.hair = eval_hair_brdf(context.hair_sampling.per_hit
-                                      ? make_hair_precomputed(material.hair, context.hair_sampling.fast_pow)
-                                      : context.hair[instance.material],
+      auto& sampling = context.hair_sampling;
+      point.hair     = eval_hair_brdf(sampling.per_hit
+                                          ? make_hair_precomputed(material.hair, sampling.fast_pow)
+                                          : context.hair[instance.material],
           fiber.h, fiber.frame, -ray.d);
     }
   }

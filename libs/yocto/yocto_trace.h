@@ -5,11 +5,12 @@
 // environment, area light or distant light; a constant environment is left to
 // BSDF sampling, which finds it as well without a shadow ray) with a shadow
 // ray, combining the two with multiple importance sampling (power heuristic);
-// `naive` samples the BSDF only. Hair is shaded with Yocto/Hair at line and
-// curve hits. Each pixel sample's random numbers are Owen-scrambled Sobol
-// pairs at fixed dimensions per bounce (or independent numbers) and depend
-// only on (seed, pixel, sample index): images do not depend on the number of
-// threads, and any range of samples renders alone.
+// `naive` samples the BSDF only. Every material (hair at line and curve hits
+// included) is Yocto/Shading's: the tracer is an integrator only. Each pixel
+// sample's random numbers are Owen-scrambled Sobol pairs at fixed dimensions
+// per bounce (or independent numbers) and depend only on (seed, pixel,
+// sample index): images do not depend on the number of threads, and any
+// range of samples renders alone.
 //
 // Paths end by Russian roulette once their throughput falls below a
 // threshold that a pilot chooses per render for the image's efficiency
