@@ -453,7 +453,10 @@ def write_report(out, config, results, limits, scales, pows, plots, command):
              "Do not edit: rerun the command.", "",
              "Before/after table: [efficiency.md](efficiency.md), the efficiency of the "
              "previous default against the new one, written by "
-             "`scripts/bench/efficiency.py`.", "",
+             "`scripts/bench/efficiency.py`. Denoised error (OIDN) at 4, 16 and 64 spp on "
+             "the same four scenes, MSE and FLIP, with and without aux layers, normal against "
+             "tangent: [denoise.md](denoise.md), written by "
+             "`scripts/bench/denoise_report.py`.", "",
              f"Images {config['resolution']} pixels on the largest side; references at "
              "the spp given below (seed 1, all threads); every variant renders at 1, 2, 4, "
              "... spp up to an eighth of the reference's spp (so that the reference's own "
