@@ -1883,6 +1883,9 @@ static bool parse_directive(pbrt_state& state, std::string_view directive) {
     if (!parse_transform(state, directive)) return false;
   } else if (directive == "Include" || directive == "Import") {
     if (!parse_include(state)) return false;
+    // The list holds the included file's last parameters, whose names point
+    // into its text, freed by now: Include has none of its own to check.
+    state.list.count = 0;
   } else if (directive == "Material") {
     if (!with_type("a material type") || !parse_params(state)) return false;
     auto material = make_pbrt_material(state, state.type);
