@@ -4,7 +4,8 @@
 # that a merge refuses parts of different code. The file is rewritten only
 # when the hash changes, so that nothing recompiles otherwise.
 file(GLOB_RECURSE sources LIST_DIRECTORIES false
-     "${SOURCE_DIR}/libs/*.h" "${SOURCE_DIR}/libs/*.cpp" "${SOURCE_DIR}/apps/*.cpp")
+     "${SOURCE_DIR}/libs/*.h" "${SOURCE_DIR}/libs/*.cpp" "${SOURCE_DIR}/apps/*.h"
+     "${SOURCE_DIR}/apps/*.cpp")
 list(SORT sources)
 set(listing "")
 foreach(source ${sources})

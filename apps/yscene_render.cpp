@@ -1,0 +1,560 @@
+//
+// yscene render: a scene to an image, or to a part of one (--sample-range)
+// for yscene merge.
+//
+
+#include <sys/resource.h>
+
+#include <atomic>
+#include <charconv>
+#include <chrono>
+#include <csignal>
+#include <cstdio>
+#include <filesystem>
+#include <functional>
+#include <yocto/yocto_bvh.h>
+
+#include "yocto_source_hash.h"  // generated from the sources: YOCTO_SOURCE_HASH
+#include "yscene_cli.h"
+
+using namespace yocto;
+
+// -----------------------------------------------------------------------------
+// RENDER
+// -----------------------------------------------------------------------------
+
+// HH:MM:SS, for the progress line.
+static std::string format_duration(double seconds) {
+  auto total = (int64_t)(seconds + 0.5);
+  char buffer[64];
+  std::snprintf(buffer, sizeof(buffer), "%02d:%02d:%02d", (int)(total / 3600),
+      (int)((total / 60) % 60), (int)(total % 60));
+  return buffer;
+}
+
+// Peak resident memory of this process in bytes.
+static int64_t peak_memory() {
+  auto usage = rusage{};
+  getrusage(RUSAGE_SELF, &usage);
+  return (int64_t)usage.ru_maxrss * 1024;
+}
+
+// CPU time of this process (user and system) in seconds.
+static double cpu_seconds() {
+  auto usage = rusage{};
+  getrusage(RUSAGE_SELF, &usage);
+  return usage.ru_utime.tv_sec + usage.ru_utime.tv_usec * 1e-6 + usage.ru_stime.tv_sec +
+         usage.ru_stime.tv_usec * 1e-6;
+}
+
+// The first Ctrl-C asks the render to stop after its pass; a second one,
+// while that pass or loading still runs, ends the program as usual.
+static std::atomic<bool> interrupted = false;
+static void handle_sigint(int signal) {
+  if (interrupted) return handle_fatal_signal(signal);
+  interrupted = true;
+}
+
+// OUTPUT with "-NNNNNspp" before the extension.
+static std::string checkpoint_filename(const std::string& output, int samples) {
+  auto extension = path_extension(output);
+  char suffix[32];
+  std::snprintf(suffix, sizeof(suffix), "-%05dspp", samples);
+  return output.substr(0, output.size() - extension.size()) + suffix + extension;
+}
+
+static bool is_power_of_two(int n) { return n > 0 && (n & (n - 1)) == 0; }
+
+// The limit of the renderer's speed: renders the samples (timed), records the
+// same rays again (the render is deterministic) and casts them through Embree
+// alone (timed, median of three). Prints both rates and their ratio.
+static int run_raycast(const render_options& options, const scene_data& scene,
+    const scene_bvh& bvh, const trace_context& context, const trace_params& params) {
+  auto state = trace_state{};
+  init_trace_state(state, scene, params);
+  auto start = std::chrono::steady_clock::now();
+  auto cpu   = cpu_seconds();
+  trace_samples(state, scene, bvh, context, params, params.samples);
+  auto render_time = seconds_since(start), render_cpu = cpu_seconds() - cpu;
+  auto render_rays = (double)state.rays;
+  init_trace_state(state, scene, params);
+  auto rays = record_trace_rays(state, scene, bvh, context, params, params.samples);
+  if ((double)rays.size() != render_rays)
+    return print_error("the recorded rays differ from the rendered ones");
+  auto times = std::vector<double>{}, cpus = std::vector<double>{};
+  auto hits  = (int64_t)0;
+  for (auto run = 0; run < 3; run++) {
+    auto run_start = std::chrono::steady_clock::now();
+    auto run_cpu   = cpu_seconds();
+    hits           = cast_trace_rays(bvh, rays, params.threads);
+    times.push_back(seconds_since(run_start));
+    cpus.push_back(cpu_seconds() - run_cpu);
+  }
+  std::sort(times.begin(), times.end());
+  std::sort(cpus.begin(), cpus.end());
+  std::printf("raycast %s: %zu rays (%.1f%% hit) of %d spp at %dx%d\n", options.scene.c_str(),
+      rays.size(), 100.0 * hits / std::max(rays.size(), (size_t)1), params.samples,
+      state.width, state.height);
+  std::printf("  renderer   %s rays/s (%.3fs, cpu %.3fs)\n",
+      format_count(render_rays / render_time).c_str(), render_time, render_cpu);
+  std::printf("  embree     %s rays/s (%.3fs, cpu %.3fs, median of 3)\n",
+      format_count(rays.size() / times[1]).c_str(), times[1], cpus[1]);
+  std::printf("  renderer / embree: %.3f (by cpu time %.3f)\n",
+      (render_rays / render_time) / (rays.size() / times[1]),
+      (render_rays / render_cpu) / (rays.size() / cpus[1]));
+  if (options.stats)
+    std::printf("stats rays=%zu render_seconds=%.6f render_cpu=%.6f embree_seconds=%.6f "
+                "embree_cpu=%.6f\n",
+        rays.size(), render_time, render_cpu, times[1], cpus[1]);
+  return 0;
+}
+
+// Checks before any work that the output can be written: its folder takes a
+// new file, the name is not a folder, the disk holds the image (12 bytes a
+// pixel, the float formats' size, bounds every image format) and JPEG's largest
+// side is not exceeded.
+static bool check_render_output(
+    const render_options& options, const trace_params& params, std::string& error) {
+  auto side = (double)std::max(params.resolution, 1);
+  if ((path_extension(options.output) == ".jpg" || path_extension(options.output) == ".jpeg") &&
+      side > 65500) {
+    error = options.output + ": JPEG images are at most 65500 pixels a side (resolution " +
+            std::to_string(params.resolution) + ")";
+    return false;
+  }
+  auto pixel_bytes = options.sample_range.empty() ? 12 : render_part_pixel_bytes;
+  // AOVs: 23 float channels, or their sums in a part.
+  if (params.aovs)
+    pixel_bytes += options.sample_range.empty() ? 23 * 4
+                                                : trace_aov_sums * render_part_extra_bytes;
+  return check_output_file(options.output, side * side * pixel_bytes + 65536, error);
+}
+
+// After a failed save, writes the render as STEM-rescued.exr next to the
+// output, else in the current folder, else in the temporary one (numbered
+// if taken: an existing file is never overwritten). `save` writes it to a
+// name without replacing anything.
+static bool save_rescued_render(const std::string& output,
+    const std::function<bool(const std::string&, std::string&)>& save, std::string& rescued) {
+  auto name    = std::filesystem::path(output).stem().string() + "-rescued";
+  auto folders = std::vector<std::string>{
+      path_dirname(output), "", std::filesystem::temp_directory_path().string()};
+  for (auto& folder : folders) {
+    for (auto attempt = 0; attempt < 100; attempt++) {
+      rescued = path_join(
+          folder, name + (attempt == 0 ? "" : "-" + std::to_string(attempt)) + ".exr");
+      auto ec = std::error_code{};
+      if (std::filesystem::exists(rescued, ec)) continue;
+      auto error = std::string{};
+      if (save(rescued, error)) return true;
+      break;  // this folder does not take it: the next one
+    }
+  }
+  return false;
+}
+
+// The compiler that built this program, as it names itself.
+static std::string compiler_name() {
+#if defined(__clang__)
+  return "clang " __clang_version__;
+#elif defined(__GNUC__)
+  return "gcc " __VERSION__;
+#else
+  return "unknown compiler";
+#endif
+}
+
+// What every part of one render shares, one "key=value" a line, for a merge
+// to compare: the scene's fingerprint, the camera and everything else that
+// changes a sample's value (floats with 9 digits, which round-trip). The
+// threads are left out: they do not change a bit.
+static std::string render_settings(const scene_data& scene, const trace_params& params,
+    const render_options& options, const trace_state& state) {
+  auto text = std::string{};
+  auto line = [&](const std::string& key, const std::string& value) {
+    text += key + "=" + value + "\n";
+  };
+  auto number = [](double value) {
+    char buffer[64];
+    std::snprintf(buffer, sizeof(buffer), "%.9g", value);
+    return std::string(buffer);
+  };
+  auto numbers = [&](std::initializer_list<float> values) {
+    auto result = std::string{};
+    for (auto value : values) result += (result.empty() ? "" : " ") + number(value);
+    return result;
+  };
+  auto& camera = scene.cameras[params.camera];
+  auto& frame  = camera.frame;
+  // The code that renders: the same settings on other sources, another
+  // compiler or another Embree may give other bits (fibre semantics change).
+  line("renderer", std::string(YOCTO_SOURCE_HASH) + " " + compiler_name() + " embree " +
+                       embree_version());
+  line("scene", hex_string(fingerprint_scene(scene)));
+  line("camera", std::to_string(params.camera));
+  line("camera_frame", numbers({frame.x.x, frame.x.y, frame.x.z, frame.y.x, frame.y.y,
+                           frame.y.z, frame.z.x, frame.z.y, frame.z.z, frame.o.x, frame.o.y,
+                           frame.o.z}));
+  line("camera_lens", numbers({camera.lens, camera.film, camera.aspect, camera.focus,
+                          camera.aperture, camera.orthographic ? 1.0f : 0.0f}));
+  line("resolution", std::to_string(state.width) + "x" + std::to_string(state.height));
+  line("seed", std::to_string(params.seed));
+  line("sampler", trace_sampler_names[(int)params.sampler]);
+  line("lights", trace_lights_names[(int)params.lights]);
+  line("sequence", sequence_names[(int)params.sequence]);
+  line("sobol_bounces", std::to_string(params.sobol_bounces));
+  line("bounces", std::to_string(params.bounces));
+  line("roulette_bounce", std::to_string(params.roulette_bounce));
+  line("roulette_threshold", number(params.roulette_threshold));
+  line("split", std::to_string(params.split));
+  line("shadow_threshold", number(params.shadow_threshold));
+  line("clamp", number(params.clamp));
+  // Only when on, so that the settings of renders without AOVs stay as they were.
+  if (params.aovs) line("aovs", "1");
+  line("hair", std::string(params.hair_sampling.four_numbers ? "four-numbers" : "demux") +
+                   (params.hair_sampling.per_hit ? " per-hit" : "") +
+                   (params.hair_sampling.mixture_weight ? " mixture-weight" : "") +
+                   (params.hair_sampling.fast_pow ? " fast-pow" : ""));
+  line("curves", options.curves + (options.curves == "lines"
+                                        ? " " + std::to_string(options.segments) : "") +
+                     (options.flat_curves ? " flat" : " round") + " pieces " +
+                     std::to_string(options.curve_pieces));
+  // Of Embree's configuration, only the instruction set changes a bit.
+  line("isa", embree_isa(options.embree_config));
+  line("bvh", options.bvh_quality + (options.no_flatten ? " instances" : " flatten") +
+                  (options.bvh_compact ? " compact" : ""));
+  return text;
+}
+
+// A:B from --sample-range: the part's samples A ... B - 1 of `samples`.
+static bool parse_sample_range(
+    const std::string& text, int samples, int& first, int& end, std::string& error) {
+  auto colon = text.find(':');
+  auto parse = [](const std::string& digits, int& value) {
+    auto result = std::from_chars(digits.data(), digits.data() + digits.size(), value);
+    return !digits.empty() && result.ec == std::errc{} &&
+           result.ptr == digits.data() + digits.size();
+  };
+  if (colon == std::string::npos || !parse(text.substr(0, colon), first) ||
+      !parse(text.substr(colon + 1), end)) {
+    error = "--sample-range " + text + ": expected A:B, two whole numbers";
+    return false;
+  }
+  if (first < 0 || end <= first || end > samples) {
+    error = "--sample-range " + text + ": expected 0 <= A < B <= " + std::to_string(samples) +
+            " (the render's samples)";
+    return false;
+  }
+  return true;
+}
+
+// Loads, checks, builds the BVH, renders in passes and saves.
+static int render_scene(const render_options& options, trace_params params,
+    const CLI::App& command) {
+  auto is_part = !options.sample_range.empty();
+  if (is_part && path_extension(options.output) != ".exr")
+    return print_error(options.output + ": a render part (--sample-range) is an OpenEXR "
+                                        "image: use a name ending in .exr");
+  if (is_part && (options.checkpoints || options.time_budget > 0 || options.embree_only))
+    return print_error(
+        "--sample-range renders one part: --checkpoints, --time-budget and --embree-only "
+        "do not apply");
+  if (!is_image_filename(options.output))
+    return print_error(options.output + ": unknown image extension (use exr, hdr, pfm, png or jpg)");
+  if (params.aovs && path_extension(options.output) != ".exr")
+    return print_error(options.output + ": --aovs writes the AOVs as layers of an OpenEXR "
+                                        "image: use a name ending in .exr");
+  if (params.aovs && options.embree_only)
+    return print_error("--embree-only casts rays alone: --aovs does not apply");
+  // Ctrl-C from here on ends the render after its current pass (after the
+  // first, if it comes while loading) and saves the samples done.
+  interrupted   = false;
+  auto previous = std::signal(SIGINT, handle_sigint);
+  auto start    = std::chrono::steady_clock::now();
+  auto scene    = scene_data{};
+  auto error = std::string{};
+  if (!load_any_scene(options.scene, scene, error, {})) return print_error(error);
+  if (!make_output_directory(options.output, error)) return print_error(error);
+  add_missing_camera(scene);
+  if (options.curves == "lines") {
+    for (auto& shape : scene.shapes)
+      if (!shape.curves.empty()) shape = curves_to_lines(shape, options.segments);
+  }
+  // Settings carried by the scene file are defaults the command line overrides.
+  if (scene.settings.samples > 0 && command.count("--samples") == 0)
+    params.samples = scene.settings.samples;
+  if (scene.settings.bounces > 0 && command.count("--bounces") == 0)
+    params.bounces = scene.settings.bounces;
+  if (scene.settings.resolution > 0 && command.count("--resolution") == 0)
+    params.resolution = scene.settings.resolution;
+  if (!options.camera.empty()) {
+    auto found = std::find(scene.camera_names.begin(), scene.camera_names.end(), options.camera);
+    if (found == scene.camera_names.end())
+      return print_error(options.scene + ": no camera named " + options.camera);
+    params.camera = (int)(found - scene.camera_names.begin());
+  }
+  if (!check_trace_params(scene, params, error)) return print_error(options.scene + ": " + error);
+  // The samples to render: all, or the part's range.
+  auto first = 0, end = params.samples;
+  if (is_part && !parse_sample_range(options.sample_range, params.samples, first, end, error))
+    return print_error(error);
+  auto count = end - first;
+  // The image buffers, before they are allocated.
+  auto size = camera_resolution(scene.cameras[params.camera], params.resolution);
+  auto from = command.count("--resolution") ? std::string(" (--resolution)")
+                                            : std::string(" (the scene's settings)");
+  if (!check_load_memory(options.scene,
+          "a render at resolution " + std::to_string(params.resolution) + from + ", " +
+              std::to_string(size.x) + "x" + std::to_string(size.y) + " pixels,",
+          trace_image_bytes(scene, params), error))
+    return print_error(error);
+  if (!check_render_output(options, params, error)) return print_error(error);
+  auto load_time = seconds_since(start);
+
+  auto bvh        = scene_bvh{};
+  auto bvh_params_ = bvh_params{};
+  bvh_params_.flat_curves = options.flat_curves;
+  bvh_params_.flatten     = !options.no_flatten;
+  bvh_params_.quality     = enum_from_name<bvh_quality_type>(bvh_quality_names,
+      options.bvh_quality);
+  bvh_params_.embree_config = options.embree_config;
+  bvh_params_.compact       = options.bvh_compact;
+  bvh_params_.max_curve_pieces = options.curve_pieces;
+  if (!make_scene_bvh(bvh, scene, bvh_params_, error))
+    return print_error(options.scene + ": " + error);
+  auto context = make_trace_context(scene, params);
+  if (options.embree_only) return run_raycast(options, scene, bvh, context, params);
+  auto state  = trace_state{};
+  init_trace_state(state, scene, params, first);
+  if (!options.quiet)
+    std::fprintf(stderr, "loaded %s in %.2fs, bvh in %.2fs (%s bytes); rendering %dx%d\n",
+        options.scene.c_str(), load_time, bvh.build_seconds,
+        format_count((double)bvh.peak_memory).c_str(), state.width, state.height);
+
+  // Passes of samples: Ctrl-C ends the current pass and saves. A pass ends
+  // on a power of two (the checkpoints and the time budget stop there) and
+  // takes up to about two seconds at the speed of the passes so far. A
+  // pixel's samples in a row find its fibres and BVH nodes still in the
+  // cache: 2.5-10% less CPU on the peers' hair balls at 64 spp than one
+  // sample per pixel per pass (6% with one thread). Each sample is the same
+  // whatever the pass.
+  auto render_start   = std::chrono::steady_clock::now();
+  auto render_cpu     = cpu_seconds();
+  auto last_progress  = -1.0;
+  while (state.samples < count && (state.samples == 0 || !interrupted)) {
+    auto pass = 1;
+    if (state.samples > 0) {
+      auto per_sample = seconds_since(render_start) / state.samples;
+      auto aligned    = state.samples & -state.samples;  // the next power of two stays a step
+      while (pass * 2 <= aligned && pass * 2 * per_sample <= 2.0) pass *= 2;
+    }
+    trace_samples(state, scene, bvh, context, params, std::min(pass, count - state.samples));
+    auto elapsed = seconds_since(render_start);
+    if (options.checkpoints && is_power_of_two(state.samples)) {
+      // Saving is not rendering: its time is left out of the figures.
+      auto save_start = std::chrono::steady_clock::now();
+      auto filename   = checkpoint_filename(options.output, state.samples);
+      auto saved = params.aovs
+                       ? save_image_layers(filename, get_image(state),
+                             get_aov_layers(state.width, state.height, state.aov_sums,
+                                 state.samples),
+                             error)
+                       : save_image(filename, get_image(state), error, options.exposure);
+      if (!saved) return print_error(error);
+      std::printf("checkpoint spp=%d seconds=%.6f cpu_seconds=%.6f rays=%lld file=%s\n",
+          state.samples, elapsed, cpu_seconds() - render_cpu, (long long)state.rays.load(),
+          filename.c_str());
+      std::fflush(stdout);
+      render_start += std::chrono::steady_clock::now() - save_start;
+    }
+    if (options.time_budget > 0 && elapsed >= options.time_budget &&
+        is_power_of_two(state.samples))
+      break;
+    if (!options.quiet && (elapsed - last_progress > 0.25 || state.samples == count)) {
+      last_progress = elapsed;
+      auto fraction = (double)state.samples / count;
+      auto eta      = elapsed / fraction - elapsed;
+      auto bar      = std::string(30, ' ');
+      for (auto i = 0; i < (int)(fraction * 30); i++) bar[i] = '#';
+      std::fprintf(stderr, "\r[%s] %d/%d spp  elapsed %s  eta %s ", bar.c_str(),
+          state.samples, count, format_duration(elapsed).c_str(),
+          format_duration(eta).c_str());
+    }
+  }
+  std::signal(SIGINT, previous);
+  auto render_time = seconds_since(render_start);
+  render_cpu       = cpu_seconds() - render_cpu;
+  if (!options.quiet) std::fprintf(stderr, "\n");
+  if (interrupted)
+    std::fprintf(stderr, "interrupted: saving the %d samples per pixel done\n", state.samples);
+  if (state.nonfinite > 0)
+    std::fprintf(stderr, "warning: %lld NaN or Inf samples were dropped\n",
+        (long long)state.nonfinite.load());
+
+  // A part keeps the exact sums of the samples done (all of its range,
+  // unless interrupted: a merge then reports the gap).
+  auto part = render_part{};
+  if (is_part) {
+    part.settings  = render_settings(scene, params, options, state);
+    part.samples   = params.samples;
+    part.first     = first;
+    part.count     = state.samples;
+    part.width     = state.width;
+    part.height    = state.height;
+    part.rays      = state.rays;
+    part.nonfinite = state.nonfinite;
+    part.sums      = std::move(state.sums);
+    part.extra     = params.aovs ? trace_aov_sums : 0;
+    part.extra_sums = std::move(state.aov_sums);
+  }
+  auto image  = is_part ? texture_data{} : get_image(state);
+  auto layers = is_part || !params.aovs
+                    ? std::vector<image_layer>{}
+                    : get_aov_layers(state.width, state.height, state.aov_sums, state.samples);
+  auto save   = [&](const std::string& filename, std::string& error, bool replace) {
+    if (is_part) return save_render_part(filename, part, error, replace);
+    if (params.aovs) return save_image_layers(filename, image, layers, error, replace);
+    return save_image(filename, image, error, options.exposure, replace);
+  };
+  if (!save(options.output, error, true)) {
+    // The output was checked before the render, yet the write failed (the
+    // disk filled up, say): the samples are worth keeping.
+    auto rescued     = std::string{};
+    auto save_rescue = [&](const std::string& filename, std::string& error) {
+      return is_part || params.aovs ? save(filename, error, false)
+                                    : save_image(filename, image, error, 0, false);
+    };
+    if (save_rescued_render(options.output, save_rescue, rescued))
+      return print_error(error + "; the render was saved to " + rescued);
+    return print_error(error + "; the render could not be saved elsewhere either");
+  }
+  auto samples = (double)state.width * state.height * state.samples;
+  auto what    = is_part ? "part " + options.output + " (samples " + std::to_string(first) + ":" +
+                            std::to_string(first + state.samples) + " of " +
+                            std::to_string(params.samples) + ")"
+                         : options.output;
+  if (!options.quiet) {
+    std::printf(
+        "rendered %s: %dx%d, %d spp in %.2fs (%s samples/s, %s rays/s, peak memory %s bytes)\n",
+        what.c_str(), state.width, state.height, state.samples, render_time,
+        format_count(samples / render_time).c_str(),
+        format_count((double)state.rays / render_time).c_str(),
+        format_count((double)peak_memory()).c_str());
+    // Clamping biases the image: say by how much.
+    if (params.clamp > 0)
+      std::printf("clamp %g: %lld of %s samples clamped, removing %.3g%% of their energy "
+                  "(--clamp 0 for none)\n",
+          params.clamp, (long long)state.clamped.load(), format_count(samples).c_str(),
+          100 * clamped_energy_fraction(state));
+  }
+  if (options.stats) {
+    auto segments = (size_t)0;
+    for (auto& shape : scene.shapes) segments += shape.lines.size() + shape.curves.size();
+    std::printf("stats load_seconds=%.6f bvh_seconds=%.6f bvh_bytes=%lld segments=%zu "
+                "width=%d height=%d spp=%d render_seconds=%.6f render_cpu=%.6f rays=%lld "
+                "peak_memory=%lld clamped=%lld clamped_energy=%.6g roulette_threshold=%.6g\n",
+        load_time, bvh.build_seconds, (long long)bvh.peak_memory, segments, state.width,
+        state.height, state.samples, render_time, render_cpu, (long long)state.rays.load(),
+        (long long)peak_memory(), (long long)state.clamped.load(),
+        clamped_energy_fraction(state), state.roulette_threshold);
+  }
+  return 0;
+}
+
+CLI::App* add_render_command(CLI::App& app, render_command& command, std::string& max_memory) {
+  auto& options  = command.options;
+  auto& params   = command.params;
+  auto& sampler  = command.sampler;
+  auto& lights   = command.lights;
+  auto& sequence = command.sequence;
+  auto  render   = app.add_subcommand("render", "render a scene to an image");
+  render->add_option("scene", options.scene,
+      "scene: json (Yocto/GL), pbrt or pbrt.gz (pbrt-v3/v4), or hair (Cem Yuksel's strands "
+      "under a default sky and camera)")->required();
+  render->add_option("--output,-o", options.output, "output image (exr, hdr, pfm, png, jpg)")
+      ->required();
+  render->add_option("--samples,-s", params.samples, "samples per pixel");
+  render->add_option("--resolution,-r", params.resolution, "largest image side in pixels");
+  render->add_option("--sampler", sampler, "path (MIS) or naive (BSDF sampling only)")
+      ->check(CLI::IsMember(trace_sampler_names));
+  render->add_option("--lights", lights,
+          "lights sampled by path: automatic (those BSDF sampling does not find as well) or all")
+      ->check(CLI::IsMember(trace_lights_names));
+  render->add_option("--sequence", sequence,
+          "random numbers of a pixel: sobol (Owen-scrambled) or independent")
+      ->check(CLI::IsMember(sequence_names));
+  render->add_option("--sobol-bounces", params.sobol_bounces,
+          "bounces drawing Sobol numbers (independent numbers after them)")
+      ->check(CLI::NonNegativeNumber);
+  render->add_option("--roulette-bounce", params.roulette_bounce,
+          "first bounce where Russian roulette may end a path that lost energy")
+      ->check(CLI::NonNegativeNumber);
+  render->add_option("--roulette-threshold", params.roulette_threshold,
+          "paths whose throughput falls below this play Russian roulette");
+  render->add_option("--split", params.split,
+          "paths per camera ray, sharing its first hit");
+  render->add_option("--shadow-threshold", params.shadow_threshold,
+          "light samples that would add less than this play a roulette for their shadow ray")
+      ->check(CLI::NonNegativeNumber);
+  render->add_option("--bounces,-b", params.bounces, "maximum scattering events per path (pbrt's maxdepth)");
+  render->add_option("--threads,-t", params.threads, "threads (0 = all cores)");
+  render->add_option("--seed", params.seed, "random seed");
+  render->add_option("--clamp", params.clamp,
+      "scale samples down to this largest component (0 = off, the default): fewer "
+      "fireflies, a darker (biased) image; the summary says how much it removed");
+  render->add_option("--exposure,-e", options.exposure, "exposure for png/jpg (stops)");
+  render->add_option("--camera", options.camera, "camera name");
+  render->add_flag("--flat-curves", options.flat_curves, "ray-facing flat fibers");
+  render->add_flag("--hair-four-numbers", params.hair_sampling.four_numbers,
+      "sample hair with four random numbers instead of demuxing two");
+  render->add_flag("--quiet,-q", options.quiet,
+      "print nothing on success (no progress, no summary; errors and warnings still go to "
+      "stderr, --stats and --checkpoints lines to stdout)");
+  render->add_option("--curves", options.curves,
+          "native Bezier curves, or line segments tessellated after loading")
+      ->check(CLI::IsMember({"native", "lines"}));
+  render->add_option("--segments", options.segments, "line segments per curve with --curves lines")
+      ->check(CLI::Range(1, 64));
+  render->add_flag("--hair-per-hit", params.hair_sampling.per_hit,
+      "compute the hair material terms at every hit (as the thesis), not once per material");
+  render->add_flag("--hair-mixture-weight", params.hair_sampling.mixture_weight,
+      "weigh sampled hair directions by eval / pdf of the lobe mixture even where no MIS needs "
+      "the pdf (by default the sampled lobe's own weight, which skips the evaluation)");
+  render->add_flag("--hair-fast-pow", params.hair_sampling.fast_pow,
+      "hair roughness powers by repeated squaring instead of std::pow (matters with --hair-per-hit)");
+  render->add_flag("--no-flatten", options.no_flatten,
+      "keep every instance an Embree instance (no single-level BVH for identity frames)");
+  render->add_flag("--checkpoints", options.checkpoints,
+      "also save OUTPUT-NNNNNspp.EXT at 1, 2, 4, ... spp and print a line for each");
+  render->add_option("--time-budget", options.time_budget,
+          "stop at the first power-of-two spp reached after this many seconds")
+      ->check(CLI::NonNegativeNumber);
+  render->add_option("--bvh-quality", options.bvh_quality, "Embree build quality")
+      ->check(CLI::IsMember({"low", "medium", "high"}));
+  render->add_option("--embree-config", options.embree_config,
+      "Embree device configuration (e.g. verbose=2 prints the BVH Embree builds)");
+  render->add_option("--curve-pieces", options.curve_pieces,
+          "give Embree bent Bezier segments as up to this many exact pieces (1: never)")
+      ->check(CLI::Range(1, 4));
+  render->add_flag("--bvh-compact", options.bvh_compact,
+      "Embree's compact BVH layout (less memory, slower)");
+  render->add_flag("--stats", options.stats, "print a machine-readable line of figures");
+  render->add_flag("--aovs", params.aovs,
+      "also write albedo, normal, tangent, depth, coverage and hair lobe layers (exr)");
+  render->add_option("--sample-range", options.sample_range,
+      "A:B: render only samples A ... B-1 of the --samples render and write them as a part "
+      "(.exr) for yscene merge");
+  render->add_flag("--embree-only", options.embree_only,
+      "render, then cast the same rays through Embree alone and compare rays/s "
+      "(no image is written; use few samples: every ray is kept in memory)");
+  add_max_memory_option(render, max_memory);
+  return render;
+}
+
+int run_render(const render_command& command, const CLI::App& cli) {
+  auto params     = command.params;
+  params.sampler  = enum_from_name<trace_sampler_type>(trace_sampler_names, command.sampler);
+  params.lights   = enum_from_name<trace_lights_type>(trace_lights_names, command.lights);
+  params.sequence = enum_from_name<sequence_type>(sequence_names, command.sequence);
+  return render_scene(command.options, params, cli);
+}
