@@ -320,8 +320,35 @@ static int render_scene(const render_options& options, trace_params params,
   bvh_params_.embree_config = options.embree_config;
   bvh_params_.compact       = options.bvh_compact;
   bvh_params_.max_curve_pieces = options.curve_pieces;
-  if (!make_scene_bvh(bvh, scene, bvh_params_, error))
-    return print_error(options.scene + ": " + error);
+  // The BVH takes what the memory budget leaves after the scene and the
+  // image. Over it, the build is tried again with half the curve pieces (the
+  // same curves, looser bounds: slower rays), then in the compact layout, and
+  // fails with a message only then. `built` says what was used: the parts'
+  // settings record it.
+  auto scene_bytes = 0.0;
+  for (auto& shape : scene.shapes) scene_bytes += shape_memory(shape);
+  for (auto& texture : scene.textures) scene_bytes += texture.pixels.size() * sizeof(vec3f);
+  bvh_params_.max_bytes = load_memory_limit - scene_bytes - trace_image_bytes(scene, params);
+  if (!(bvh_params_.max_bytes > 0))
+    return print_error(options.scene + ": the scene and the image leave no memory for the "
+                                       "BVH within the memory budget (raise --max-memory)");
+  auto built = options;
+  while (!make_scene_bvh(bvh, scene, bvh_params_, error)) {
+    if (!bvh.over_budget) return print_error(options.scene + ": " + error);
+    if (bvh_params_.max_curve_pieces > 1) {
+      bvh_params_.max_curve_pieces /= 2;
+    } else if (!bvh_params_.compact) {
+      bvh_params_.compact = true;
+    } else {
+      return print_error(options.scene + ": " + error + ", with one piece a curve and the "
+                         "compact layout (raise --max-memory)");
+    }
+    std::fprintf(stderr, "warning: %s: %s; building it again with %d curve pieces%s\n",
+        options.scene.c_str(), error.c_str(), bvh_params_.max_curve_pieces,
+        bvh_params_.compact ? ", compact" : "");
+    built.curve_pieces = bvh_params_.max_curve_pieces;
+    built.bvh_compact  = bvh_params_.compact;
+  }
   auto context = make_trace_context(scene, params);
   if (options.embree_only) return run_raycast(options, scene, bvh, context, params);
   auto state  = trace_state{};
@@ -395,7 +422,7 @@ static int render_scene(const render_options& options, trace_params params,
   // unless interrupted: a merge then reports the gap).
   auto part = render_part{};
   if (is_part) {
-    part.settings  = render_settings(scene, params, options, state);
+    part.settings  = render_settings(scene, params, built, state);
     part.samples   = params.samples;
     part.first     = first;
     part.count     = state.samples;

@@ -686,3 +686,46 @@ TEST(cli, clamp_is_off_by_default_and_reports_what_it_removes) {
   EXPECT_LT(clamped_sum, plain_sum);
   fs::remove_all(dir);
 }
+
+TEST(cli, max_memory_bounds_the_bvh_too) {
+  // A curly groom of 2,000 strands: its BVH with 4 curve pieces (the
+  // default) takes about three times the bytes of 1. With --max-memory at the
+  // scene, the image and 0.6 of the 4-piece BVH, the render warns, builds
+  // again with fewer pieces and succeeds, and its part records the pieces it
+  // used; with the scene and image alone it fails with one line naming the
+  // budget, exit 1, and writes nothing (never an abort).
+  auto dir = make_test_dir("bvh-budget");
+  auto scene = (dir / "curly.json").string();
+  ASSERT_EQ(run_yscene("hair --style curly --strands 2000 --quiet --output " + scene).status, 0);
+  auto info = run_yscene("info --json " + scene);
+  ASSERT_EQ(info.status, 0) << info.output;
+  auto scene_bytes = nlohmann::json::parse(info.output)["memory"].get<double>();
+  auto stats = run_yscene("render " + scene + " --samples 1 --resolution 32 --quiet --stats "
+                          "--output " + (dir / "free.exr").string());
+  ASSERT_EQ(stats.status, 0) << stats.output;
+  auto at = stats.output.find("bvh_bytes=");
+  ASSERT_NE(at, std::string::npos) << stats.output;
+  auto bvh_bytes = std::stod(stats.output.substr(at + 10));
+  auto image_bytes = 32.0 * 32 * (72 + 12 + 3);  // trace_image_bytes of a 32x32 exr
+  auto budget = [&](double bvh) {
+    return std::to_string((long long)(scene_bytes + image_bytes + bvh));
+  };
+  auto part = (dir / "part.exr").string();
+  auto fewer = run_yscene("render " + scene + " --samples 2 --sample-range 0:1 --resolution 32 "
+                          "--quiet --max-memory " + budget(0.6 * bvh_bytes) + " --output " + part);
+  ASSERT_EQ(fewer.status, 0) << fewer.output;
+  EXPECT_NE(fewer.output.find("building it again with 2 curve pieces"), std::string::npos)
+      << fewer.output;
+  auto loaded = render_part{};
+  auto error  = std::string{};
+  ASSERT_TRUE(load_render_part(part, loaded, error)) << error;
+  EXPECT_EQ(loaded.settings.find("pieces 4"), std::string::npos) << loaded.settings;
+  auto output = dir / "none.exr";
+  auto none   = run_yscene("render " + scene + " --samples 1 --resolution 32 --quiet "
+                           "--max-memory " + budget(4096) + " --output " + output.string());
+  EXPECT_EQ(none.status, 1) << none.output;
+  EXPECT_NE(none.output.find("error: "), std::string::npos) << none.output;
+  EXPECT_NE(none.output.find("memory"), std::string::npos) << none.output;
+  EXPECT_FALSE(fs::exists(output));
+  fs::remove_all(dir);
+}

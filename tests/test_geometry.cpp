@@ -5,6 +5,7 @@
 
 #include <gtest/gtest.h>
 #include <yocto/yocto_bvh.h>
+#include <yocto/yocto_hairgen.h>
 #include <yocto/yocto_sampling.h>
 #include <yocto/yocto_scene.h>
 
@@ -729,5 +730,46 @@ TEST(bvh, bent_curves_split_into_exact_pieces_hit_like_whole_ones) {
     }
     EXPECT_GT(hits, 500);
     EXPECT_LE(disagree, 40) << "of " << hits << " hits";
+  }
+}
+
+// The memory budget of a BVH (bvh_params::max_bytes; --max-memory in
+// yscene): Embree's allocations beyond it are refused before they are made,
+// and the build fails with over_budget and a message, never a crash (also
+// under the sanitizers in CI). A curly groom: 4 curve pieces need about three
+// times the bytes of 1, so a budget of twice the 1-piece BVH refuses 4
+// pieces and takes 1; 1 KiB refuses everything, compact layout included.
+TEST(geometry, bvh_memory_budget_refuses_and_fails_cleanly) {
+  auto style    = hair_style_params{};
+  style.style   = hair_style::curly;
+  style.strands = 2000;
+  auto scene    = make_hair_scene(style, hair_material{});
+  auto error    = std::string{};
+  auto bytes    = [&](int pieces) {
+    auto bvh    = scene_bvh{};
+    auto params = bvh_params{};
+    params.max_curve_pieces = pieces;
+    EXPECT_TRUE(make_scene_bvh(bvh, scene, params, error)) << error;
+    return (double)bvh.peak_memory;
+  };
+  auto one = bytes(1), four = bytes(4);
+  std::printf("[ figure ] BVH bytes: 1 piece %.0f, 4 pieces %.0f\n", one, four);
+  ASSERT_GT(four, 2.5 * one);
+  auto build = [&](int pieces, bool compact, double budget) {
+    auto bvh    = scene_bvh{};
+    auto params = bvh_params{};
+    params.max_curve_pieces = pieces;
+    params.compact          = compact;
+    params.max_bytes        = budget;
+    auto built = make_scene_bvh(bvh, scene, params, error);
+    EXPECT_EQ(bvh.over_budget, !built);
+    return built;
+  };
+  EXPECT_FALSE(build(4, false, 2 * one));
+  EXPECT_NE(error.find("memory budget"), std::string::npos) << error;
+  EXPECT_TRUE(build(1, false, 2 * one)) << error;
+  for (auto compact : {false, true}) {
+    EXPECT_FALSE(build(1, compact, 1024));
+    EXPECT_NE(error.find("memory budget of 1024 bytes"), std::string::npos) << error;
   }
 }

@@ -35,11 +35,33 @@ static void embree_error_callback(void* user, RTCError code, const char* message
                       (message ? message : "unknown");
 }
 
-// Tracks the bytes Embree allocates; never refuses an allocation.
-static bool embree_memory_callback(void* user, ssize_t bytes, bool) {
-  auto memory = (std::atomic<int64_t>*)user;
-  *memory += bytes;
+// What Embree holds, and the most it may (0: no limit); whether an
+// allocation was refused.
+struct embree_monitor {
+  std::shared_ptr<std::atomic<int64_t>> memory  = nullptr;
+  int64_t                               limit   = 0;
+  std::atomic<bool>                     refused = false;
+};
+
+// Tracks the bytes Embree allocates and refuses, before it is made, an
+// allocation beyond the limit (Embree then fails the build with
+// RTC_ERROR_OUT_OF_MEMORY instead of taking the memory).
+static bool embree_memory_callback(void* user, ssize_t bytes, bool post) {
+  auto monitor = (embree_monitor*)user;
+  auto now     = (*monitor->memory += bytes);
+  if (bytes > 0 && !post && monitor->limit > 0 && now > monitor->limit) {
+    *monitor->memory -= bytes;
+    monitor->refused = true;
+    return false;
+  }
   return true;
+}
+
+// A geometry whose buffer Embree could not allocate (the memory budget
+// refused it: the build then fails): released, and null to the caller.
+static RTCGeometry release_unbuilt(RTCGeometry geometry) {
+  if (geometry) rtcReleaseGeometry(geometry);
+  return nullptr;
 }
 
 }  // namespace yocto
@@ -99,6 +121,7 @@ static RTCGeometry make_curve_geometry(
       RTC_FORMAT_FLOAT4, sizeof(vec4f), nvertices);
   auto indices = (uint32_t*)rtcSetNewGeometryBuffer(geometry, RTC_BUFFER_TYPE_INDEX, 0,
       RTC_FORMAT_UINT, sizeof(uint32_t), elements.size());
+  if (!vertices || !indices) return release_unbuilt(geometry);
   if (shared) {
     for (auto i = 0; i < (int)nvertices; i++) vertices[i] = fiber_vertex(shape, i);
     for (auto i = 0; i < (int)elements.size(); i++) indices[i] = elements[i][0];
@@ -113,6 +136,7 @@ static RTCGeometry make_curve_geometry(
   if (degree == 2) {
     auto flags = (uint8_t*)rtcSetNewGeometryBuffer(geometry, RTC_BUFFER_TYPE_FLAGS, 0,
         RTC_FORMAT_UCHAR, sizeof(uint8_t), elements.size());
+    if (!flags) return release_unbuilt(geometry);
     for (auto i = 0; i < (int)elements.size(); i++) {
       auto left  = shared && i > 0 && elements[i - 1][1] == elements[i][0];
       auto right = shared && i + 1 < (int)elements.size() &&
@@ -174,6 +198,7 @@ static RTCGeometry make_curve_pieces_geometry(RTCDevice device, const shape_data
       RTC_FORMAT_FLOAT4, sizeof(vec4f), npieces * 4);
   auto indices = (uint32_t*)rtcSetNewGeometryBuffer(geometry, RTC_BUFFER_TYPE_INDEX, 0,
       RTC_FORMAT_UINT, sizeof(uint32_t), npieces);
+  if (!vertices || !indices) return release_unbuilt(geometry);
   auto count = (int)shape.positions.size();
   for (size_t i = 0; i < npieces; i++) {
     auto  c       = shape.curves[pieces.pieces[i] >> 4];
@@ -262,6 +287,7 @@ static RTCGeometry make_cap_geometry(
       RTC_FORMAT_FLOAT4, sizeof(vec4f), caps.size());
   auto normals  = (vec3f*)rtcSetNewGeometryBuffer(geometry, RTC_BUFFER_TYPE_NORMAL, 0,
       RTC_FORMAT_FLOAT3, sizeof(vec3f), caps.size());
+  if (!vertices || !normals) return release_unbuilt(geometry);
   for (auto i = 0; i < (int)caps.size(); i++) {
     auto fiber  = eval_fiber_end(shape, (int)(caps[i] >> 1), (int)(caps[i] & 1));
     vertices[i] = fiber_vertex(shape, fiber.vertex);
@@ -274,9 +300,11 @@ static RTCGeometry make_triangle_geometry(RTCDevice device, const shape_data& sh
   auto geometry = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_TRIANGLE);
   auto vertices = (vec3f*)rtcSetNewGeometryBuffer(geometry, RTC_BUFFER_TYPE_VERTEX, 0,
       RTC_FORMAT_FLOAT3, sizeof(vec3f), shape.positions.size());
+  if (!vertices) return release_unbuilt(geometry);
   std::copy(shape.positions.begin(), shape.positions.end(), vertices);
   auto indices = (vec3i*)rtcSetNewGeometryBuffer(geometry, RTC_BUFFER_TYPE_INDEX, 0,
       RTC_FORMAT_UINT3, sizeof(vec3i), shape.triangles.size());
+  if (!indices) return release_unbuilt(geometry);
   std::copy(shape.triangles.begin(), shape.triangles.end(), indices);
   return geometry;
 }
@@ -330,6 +358,7 @@ static RTCGeometry make_shape_caps(
     RTCDevice device, const shape_data& shape, const std::vector<uint32_t>& caps) {
   if (caps.empty()) return nullptr;
   auto geometry = make_cap_geometry(device, shape, caps);
+  if (!geometry) return nullptr;
   rtcSetGeometryIntersectFilterFunction(geometry, ignore_hits_from_inside);
   rtcSetGeometryOccludedFilterFunction(geometry, ignore_hits_from_inside);
   rtcCommitGeometry(geometry);
@@ -413,11 +442,14 @@ bool make_scene_bvh(scene_bvh& bvh, const scene_data& scene, const bvh_params& p
     return false;
   }
   // The device owns the error and memory callbacks' targets through captures.
-  auto memory = bvh.memory;
-  bvh.device  = std::shared_ptr<void>(
-      device, [errors, memory](void* d) { rtcReleaseDevice((RTCDevice)d); });
+  auto memory     = bvh.memory;
+  auto monitor    = std::make_shared<embree_monitor>();
+  monitor->memory = memory;
+  monitor->limit  = params.max_bytes > 0 ? (int64_t)std::min(params.max_bytes, 9e18) : 0;
+  bvh.device      = std::shared_ptr<void>(
+      device, [errors, monitor](void* d) { rtcReleaseDevice((RTCDevice)d); });
   rtcSetDeviceErrorFunction(device, embree_error_callback, errors.get());
-  rtcSetDeviceMemoryMonitorFunction(device, embree_memory_callback, memory.get());
+  rtcSetDeviceMemoryMonitorFunction(device, embree_memory_callback, monitor.get());
 
   // Instances whose shape is put in the top-level scene directly: the
   // identity frame and a shape no other instance uses.
@@ -474,9 +506,13 @@ bool make_scene_bvh(scene_bvh& bvh, const scene_data& scene, const bvh_params& p
   bvh.peak_memory   = memory->load();
   bvh.build_seconds = std::chrono::duration<double>(
       std::chrono::steady_clock::now() - start).count();
-  if (!errors->message.empty()) {
-    error = errors->message;
-    bvh   = {};
+  if (monitor->refused || !errors->message.empty()) {
+    auto refused = monitor->refused.load();
+    error = refused ? "the BVH needs more than its memory budget of " +
+                          std::to_string(monitor->limit) + " bytes"
+                    : errors->message;
+    bvh             = {};
+    bvh.over_budget = refused;
     return false;
   }
   return true;

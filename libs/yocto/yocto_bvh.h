@@ -63,6 +63,10 @@ struct bvh_params {
   // ones: Embree's bounds of a bent segment are loose, and rays test it often.
   int max_curve_pieces = 4;
   std::string embree_config = "";  // Embree device configuration, e.g. "verbose=2"
+  // Most bytes Embree may hold at once (0: no limit): an allocation beyond it
+  // is refused and the build fails with over_budget set (the caller may try
+  // again with fewer curve pieces or the compact layout).
+  double max_bytes = 0;
 };
 
 // Where the pieces of a curves shape come from: piece i is the k-th of n
@@ -85,6 +89,7 @@ struct scene_bvh {
   std::shared_ptr<std::atomic<int64_t>> memory      = nullptr;
   int64_t                                 peak_memory = 0;
   double                                  build_seconds = 0;
+  bool                                    over_budget = false;  // failed on max_bytes
 };
 
 struct scene_intersection {
