@@ -77,39 +77,42 @@ material_point eval_material_point(const scene_data& scene, const shading_contex
     point.radius   = fiber.radius;
     point.tangent  = fiber.tangent;
     point.normal   = fiber.normal;
-    if (material.type == material_type::hair && context.hair_varies[instance_id]) {
-      // A groom that varies: the material of this strand at this place
-      // (the shape's colour there, the strand's variation), and of its
-      // terms only those that vary are computed again.
-      auto hair = material.hair;
-      auto t    = uv.x;  // along the segment
-      if (!shape.colors.empty() && hair.has_color && !hair.has_sigma_a) {
-        auto ends  = shape.curves.empty()
-                         ? shape.lines[element]
-                         : vec2i{shape.curves[element].x, shape.curves[element].w};
-        hair.color = shape.colors[ends.x] + (shape.colors[ends.y] - shape.colors[ends.x]) * t;
-      }
-      auto& strands = context.strands[instance.shape];
-      if (!strands.strand.empty()) {
-        auto u = strands.u[element].x + (strands.u[element].y - strands.u[element].x) * t;
-        hair   = eval_hair_material_point(
-            hair, strands.random[strands.strand[element]], std::clamp(u, 0.0f, 1.0f));
-      }
-      auto terms = context.hair[instance.material];
-      if (material.hair.random_roughness != 0 || context.hair_sampling.per_hit) {
-        terms = make_hair_precomputed(hair, context.hair_sampling.fast_pow);
-      } else {
-        terms.sigma_a = make_hair_absorption(hair);
-      }
-      point.hair = eval_hair_brdf(terms, fiber.h, fiber.frame, -ray.d);
-    } else if (material.type == material_type::hair) {
-      // With the outgoing direction, so that the terms depending on it are
-      // computed once for the three or four hair calls of this hit.
+    if (material.type == material_type::hair) {
+      // The material's own terms, unless this groom varies (the material of
+      // this strand at this place: the shape's colour there, the strand's
+      // variation; of its terms only those that vary computed again) or the
+      // terms are made at every hit. With the outgoing direction, so that the
+      // terms depending on it are computed once for the hit's hair calls.
       auto& sampling = context.hair_sampling;
-      point.hair     = eval_hair_brdf(sampling.per_hit
-                                          ? make_hair_precomputed(material.hair, sampling.fast_pow)
-                                          : context.hair[instance.material],
-          fiber.h, fiber.frame, -ray.d);
+      auto  terms    = &context.hair[instance.material];
+      auto  local    = hair_precomputed{};
+      if (context.hair_varies[instance_id]) {
+        auto hair = material.hair;
+        auto t    = uv.x;  // along the segment
+        if (!shape.colors.empty() && hair.has_color && !hair.has_sigma_a) {
+          auto ends  = shape.curves.empty()
+                           ? shape.lines[element]
+                           : vec2i{shape.curves[element].x, shape.curves[element].w};
+          hair.color = shape.colors[ends.x] + (shape.colors[ends.y] - shape.colors[ends.x]) * t;
+        }
+        auto& strands = context.strands[instance.shape];
+        if (!strands.strand.empty()) {
+          auto u = strands.u[element].x + (strands.u[element].y - strands.u[element].x) * t;
+          hair   = eval_hair_material_point(
+              hair, strands.random[strands.strand[element]], std::clamp(u, 0.0f, 1.0f));
+        }
+        if (material.hair.random_roughness != 0 || sampling.per_hit) {
+          local = make_hair_precomputed(hair, sampling.fast_pow);
+        } else {
+          local         = *terms;
+          local.sigma_a = make_hair_absorption(hair);
+        }
+        terms = &local;
+      } else if (sampling.per_hit) {
+        local = make_hair_precomputed(material.hair, sampling.fast_pow);
+        terms = &local;
+      }
+      point.hair = eval_hair_brdf(*terms, fiber.h, fiber.frame, -ray.d);
     }
   }
   if (material.color_tex >= 0)

@@ -453,7 +453,7 @@ static vec3f trace_path(const trace_walk& walk, const ray3f& camera_ray,
     aov->hit     = true;
     aov->depth   = intersection.distance;
     aov->hair    = point.type == material_type::hair;
-    aov->albedo  = glm::clamp(eval_albedo(point, -camera_ray.d), 0.0f, 1.0f);
+    aov->albedo  = eval_albedo(point, -camera_ray.d);  // in [0, 1]
     aov->normal  = point.normal;
     // A fibre seen end on has no side facing the camera: its end cap does.
     if (point.fiber && !(dot(point.normal, -camera_ray.d) > 1e-6f))

@@ -173,9 +173,14 @@ vec3f hair_sigma_a_from_color(const vec3f& color, float beta_n) {
   return sigma_a;
 }
 
+// A roughness the model can use: beta = 0 makes the variance 0 and every
+// term NaN (pbrt-v3 issue #219); NaN is taken as pbrt's default.
+static float usable_roughness(float beta) {
+  return beta == beta ? std::clamp(beta, 0.01f, 1.0f) : 0.3f;
+}
+
 vec3f make_hair_absorption(const hair_material& material) {
-  auto beta_n = std::clamp(material.beta_n, 0.01f, 1.0f);
-  if (!(beta_n == beta_n)) beta_n = 0.3f;
+  auto beta_n = usable_roughness(material.beta_n);
   // Precedence as pbrt: sigma_a, else colour, else melanin.
   auto sigma_a = vec3f{0, 0, 0};
   if (material.has_sigma_a) {
@@ -192,11 +197,8 @@ vec3f make_hair_absorption(const hair_material& material) {
 
 hair_precomputed make_hair_precomputed(const hair_material& material, bool fast_pow) {
   auto pre = hair_precomputed{};
-  // beta = 0 makes the variance 0 and every term NaN (pbrt-v3 issue #219).
-  auto beta_m = std::clamp(material.beta_m, 0.01f, 1.0f);
-  auto beta_n = std::clamp(material.beta_n, 0.01f, 1.0f);
-  if (!(beta_m == beta_m)) beta_m = 0.3f;
-  if (!(beta_n == beta_n)) beta_n = 0.3f;
+  auto beta_m = usable_roughness(material.beta_m);
+  auto beta_n = usable_roughness(material.beta_n);
   pre.beta_m = beta_m;
   pre.beta_n = beta_n;
   // eta < 1 has no meaning for a fiber in air; inf would make Fresnel NaN.
@@ -248,31 +250,27 @@ bool hair_material_varies(const hair_material& material) {
 
 hair_material eval_hair_material_point(
     const hair_material& material, const vec2f& random, float u) {
-  auto point = material;
   auto blend = material.tip_start < 1
                    ? std::clamp((u - material.tip_start) / (1 - material.tip_start), 0.0f, 1.0f)
                    : 0.0f;
   if (!(blend == blend)) blend = 0;
-  auto beta_n = std::clamp(material.beta_n, 0.01f, 1.0f);
-  if (!(beta_n == beta_n)) beta_n = 0.3f;
-  // The pigment's absorption at u, by the precedence of make_hair_precomputed.
-  auto sigma_a = vec3f{0, 0, 0};
-  if (material.has_sigma_a) {
-    auto tip = material.has_tip_sigma_a ? material.tip_sigma_a : material.sigma_a;
-    sigma_a  = glm::max(material.sigma_a + (tip - material.sigma_a) * blend, vec3f{0, 0, 0});
-  } else if (material.has_color) {
-    auto tip = material.has_tip_color ? material.tip_color : material.color;
-    sigma_a  = hair_sigma_a_from_color(material.color + (tip - material.color) * blend, beta_n);
-  } else {
-    auto eumelanin   = material.has_tip_eumelanin ? material.tip_eumelanin : material.eumelanin;
-    auto pheomelanin = material.has_tip_pheomelanin ? material.tip_pheomelanin
-                                                    : material.pheomelanin;
-    sigma_a = hair_sigma_a_from_melanin(
-        material.eumelanin + (eumelanin - material.eumelanin) * blend,
-        material.pheomelanin + (pheomelanin - material.pheomelanin) * blend);
-  }
+  // The pigment parameters at u (a tip value left out is the root's); their
+  // absorption by make_hair_absorption's precedence.
+  auto at_u = material;
+  if (material.has_tip_sigma_a)
+    at_u.sigma_a = material.sigma_a + (material.tip_sigma_a - material.sigma_a) * blend;
+  if (material.has_tip_color)
+    at_u.color = material.color + (material.tip_color - material.color) * blend;
+  if (material.has_tip_eumelanin)
+    at_u.eumelanin = material.eumelanin + (material.tip_eumelanin - material.eumelanin) * blend;
+  if (material.has_tip_pheomelanin)
+    at_u.pheomelanin = material.pheomelanin +
+                       (material.tip_pheomelanin - material.pheomelanin) * blend;
+  auto sigma_a = make_hair_absorption(at_u);
   sigma_a *= std::max(1 + (2 * random.x - 1) * material.random_melanin, 0.0f);
-  if (material.tint != vec3f{1, 1, 1}) sigma_a += hair_sigma_a_from_color(material.tint, beta_n);
+  if (material.tint != vec3f{1, 1, 1})
+    sigma_a += hair_sigma_a_from_color(material.tint, usable_roughness(material.beta_n));
+  auto point        = material;
   point.sigma_a     = sigma_a;
   point.has_sigma_a = true;
   if (material.random_roughness != 0) {
