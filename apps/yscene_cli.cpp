@@ -68,6 +68,13 @@ bool parse_memory_size(const std::string& text, double& bytes) {
   return std::isfinite(bytes) && bytes >= 1;
 }
 
+bool save_render_image(const std::string& filename, const texture_data& image,
+    const std::vector<image_layer>& layers, std::string& error, float exposure,
+    bool replace) {
+  if (!layers.empty()) return save_image_layers(filename, image, layers, error, replace);
+  return save_image(filename, image, error, exposure, replace);
+}
+
 bool load_any_scene(const std::string& filename, scene_data& scene, std::string& error,
     const pbrt_params& params) {
   auto extension = path_extension(filename);

@@ -55,6 +55,12 @@ void add_max_memory_option(CLI::App* command, std::string& max_memory);
 // suffix (powers of 1024), e.g. 4G or 1.5G.
 bool parse_memory_size(const std::string& text, double& bytes);
 
+// Saves the image of a render or a merge: with its AOV layers (an OpenEXR)
+// when it has any, else as save_image does.
+bool save_render_image(const std::string& filename, const yocto::texture_data& image,
+    const std::vector<yocto::image_layer>& layers, std::string& error, float exposure,
+    bool replace = true);
+
 // Loads a scene by extension: json, pbrt, or a Cem Yuksel .hair model.
 bool load_any_scene(const std::string& filename, yocto::scene_data& scene, std::string& error,
     const yocto::pbrt_params& params);

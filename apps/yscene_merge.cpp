@@ -149,13 +149,12 @@ int run_merge(const merge_options& options) {
   auto image = options.part ? texture_data{}
                             : get_image(merged.width, merged.height, merged.sums,
                                   merged.samples);
-  auto saved = options.part ? save_render_part(output, merged, error)
-               : aovs && path_extension(output) == ".exr"
-                   ? save_image_layers(output, image,
-                         get_aov_layers(merged.width, merged.height, merged.extra_sums,
-                             merged.samples),
-                         error)
-                   : save_image(output, image, error, options.exposure);
+  auto layers = aovs && !options.part && path_extension(output) == ".exr"
+                    ? get_aov_layers(merged.width, merged.height, merged.extra_sums,
+                          merged.samples)
+                    : std::vector<image_layer>{};
+  auto saved  = options.part ? save_render_part(output, merged, error)
+                             : save_render_image(output, image, layers, error, options.exposure);
   if (!saved) return print_error(error);
   if (merged.nonfinite > 0)
     std::fprintf(stderr, "warning: %lld NaN or Inf samples were dropped\n",

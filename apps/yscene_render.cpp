@@ -381,13 +381,9 @@ static int render_scene(const render_options& options, trace_params params,
       // Saving is not rendering: its time is left out of the figures.
       auto save_start = std::chrono::steady_clock::now();
       auto filename   = checkpoint_filename(options.output, state.samples);
-      auto saved = params.aovs
-                       ? save_image_layers(filename, get_image(state),
-                             get_aov_layers(state.width, state.height, state.aov_sums,
-                                 state.samples),
-                             error)
-                       : save_image(filename, get_image(state), error, options.exposure);
-      if (!saved) return print_error(error);
+      auto layers   = get_aov_layers(state.width, state.height, state.aov_sums, state.samples);
+      if (!save_render_image(filename, get_image(state), layers, error, options.exposure))
+        return print_error(error);
       std::printf("checkpoint spp=%d seconds=%.6f cpu_seconds=%.6f rays=%lld file=%s\n",
           state.samples, elapsed, cpu_seconds() - render_cpu, (long long)state.rays.load(),
           filename.c_str());
@@ -435,21 +431,20 @@ static int render_scene(const render_options& options, trace_params params,
     part.extra_sums = std::move(state.aov_sums);
   }
   auto image  = is_part ? texture_data{} : get_image(state);
-  auto layers = is_part || !params.aovs
-                    ? std::vector<image_layer>{}
-                    : get_aov_layers(state.width, state.height, state.aov_sums, state.samples);
+  auto layers = is_part ? std::vector<image_layer>{}
+                        : get_aov_layers(state.width, state.height, state.aov_sums,
+                              state.samples);  // none without --aovs
   auto save   = [&](const std::string& filename, std::string& error, bool replace) {
     if (is_part) return save_render_part(filename, part, error, replace);
-    if (params.aovs) return save_image_layers(filename, image, layers, error, replace);
-    return save_image(filename, image, error, options.exposure, replace);
+    return save_render_image(filename, image, layers, error, options.exposure, replace);
   };
   if (!save(options.output, error, true)) {
     // The output was checked before the render, yet the write failed (the
     // disk filled up, say): the samples are worth keeping.
     auto rescued     = std::string{};
     auto save_rescue = [&](const std::string& filename, std::string& error) {
-      return is_part || params.aovs ? save(filename, error, false)
-                                    : save_image(filename, image, error, 0, false);
+      return is_part ? save(filename, error, false)
+                     : save_render_image(filename, image, layers, error, 0, false);
     };
     if (save_rescued_render(options.output, save_rescue, rescued))
       return print_error(error + "; the render was saved to " + rescued);
