@@ -88,6 +88,7 @@ struct render_options {
   std::string embree_config = "";      // Embree device configuration
   bool        bvh_compact   = false;   // Embree's compact BVH
   int         curve_pieces  = 4;       // most exact pieces of a bent Bezier segment
+  float       curve_piece_threshold = 1;  // bend over diameter that splits (the plan's)
   std::string sample_range  = "";      // A:B: render these samples as a part
 };
 

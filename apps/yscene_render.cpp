@@ -218,7 +218,10 @@ static std::string render_settings(const scene_data& scene, const trace_params& 
   line("curves", options.curves + (options.curves == "lines"
                                         ? " " + std::to_string(options.segments) : "") +
                      (options.flat_curves ? " flat" : " round") + " pieces " +
-                     std::to_string(options.curve_pieces));
+                     std::to_string(options.curve_pieces) +
+                     (options.curve_pieces > 1 && options.curve_piece_threshold != 1
+                             ? " over " + number(options.curve_piece_threshold)
+                             : ""));
   // Of Embree's configuration, only the instruction set changes a bit.
   line("isa", embree_isa(options.embree_config));
   line("bvh", options.bvh_quality + (options.no_flatten ? " instances" : " flatten") +
@@ -332,7 +335,19 @@ static int render_scene(const render_options& options, trace_params params,
   if (!(bvh_params_.max_bytes > 0))
     return print_error(options.scene + ": the scene and the image leave no memory for the "
                                        "BVH within the memory budget (raise --max-memory)");
-  auto built = options;
+  // The curve pieces, planned: none when the render's rays (about two a
+  // sample, over all of its samples, whatever part this is, so that the
+  // parts of one render agree) do not repay their build; the most bent
+  // segments first within the budget. --curve-pieces given is kept even when
+  // it does not repay, within the budget still.
+  auto built         = options;
+  auto planned_rays  = 2.0 * size.x * size.y * params.samples;
+  if (command.count("--curve-pieces")) planned_rays = 1e30;
+  auto plan = plan_curve_pieces(scene, bvh_params_, planned_rays, bvh_params_.max_bytes);
+  bvh_params_.max_curve_pieces      = plan.max_pieces;
+  bvh_params_.curve_piece_threshold = plan.threshold;
+  built.curve_pieces                = plan.max_pieces;
+  built.curve_piece_threshold       = plan.threshold;
   while (!make_scene_bvh(bvh, scene, bvh_params_, error)) {
     if (!bvh.over_budget) return print_error(options.scene + ": " + error);
     if (bvh_params_.max_curve_pieces > 1) {
@@ -471,11 +486,17 @@ static int render_scene(const render_options& options, trace_params params,
   }
   if (options.stats) {
     auto segments = (size_t)0;
-    for (auto& shape : scene.shapes) segments += shape.lines.size() + shape.curves.size();
+    auto pieces   = (size_t)0;  // the curves Embree got for them
+    for (auto i = 0; i < (int)scene.shapes.size(); i++) {
+      auto& shape = scene.shapes[i];
+      segments += shape.lines.size() + shape.curves.size();
+      pieces += bvh.pieces[i].pieces.empty() ? shape.curves.size() : bvh.pieces[i].pieces.size();
+    }
     std::printf("stats load_seconds=%.6f bvh_seconds=%.6f bvh_bytes=%lld segments=%zu "
-                "width=%d height=%d spp=%d render_seconds=%.6f render_cpu=%.6f rays=%lld "
+                "bvh_build_peak_bytes=%lld curve_pieces=%zu width=%d height=%d spp=%d render_seconds=%.6f render_cpu=%.6f rays=%lld "
                 "peak_memory=%lld clamped=%lld clamped_energy=%.6g roulette_threshold=%.6g\n",
-        load_time, bvh.build_seconds, (long long)bvh.peak_memory, segments, state.width,
+        load_time, bvh.build_seconds, (long long)bvh.peak_memory, segments,
+        (long long)bvh.build_peak_memory, pieces, state.width,
         state.height, state.samples, render_time, render_cpu, (long long)state.rays.load(),
         (long long)peak_memory(), (long long)state.clamped.load(),
         clamped_energy_fraction(state), state.roulette_threshold);

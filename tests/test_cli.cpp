@@ -688,38 +688,54 @@ TEST(cli, clamp_is_off_by_default_and_reports_what_it_removes) {
 }
 
 TEST(cli, max_memory_bounds_the_bvh_too) {
-  // A curly groom of 2,000 strands: its BVH with 4 curve pieces (the
-  // default) takes about three times the bytes of 1. With --max-memory at the
-  // scene, the image and 0.6 of the 4-piece BVH, the render warns, builds
-  // again with fewer pieces and succeeds, and its part records the pieces it
-  // used; with the scene and image alone it fails with one line naming the
-  // budget, exit 1, and writes nothing (never an abort).
+  // A curly groom of 2,000 strands: its BVH with 4 curve pieces takes about
+  // three times the bytes of 1. With --max-memory at the scene, the image and
+  // 0.6 of the 4-piece BVH, the render plans fewer pieces (the most bent
+  // segments) up front and succeeds, and its part records the split it used;
+  // with the scene and image alone it fails with one line naming the budget,
+  // exit 1, and writes nothing (never an abort).
   auto dir = make_test_dir("bvh-budget");
   auto scene = (dir / "curly.json").string();
   ASSERT_EQ(run_yscene("hair --style curly --strands 2000 --quiet --output " + scene).status, 0);
   auto info = run_yscene("info --json " + scene);
   ASSERT_EQ(info.status, 0) << info.output;
   auto scene_bytes = nlohmann::json::parse(info.output)["memory"].get<double>();
-  auto stats = run_yscene("render " + scene + " --samples 1 --resolution 32 --quiet --stats "
-                          "--output " + (dir / "free.exr").string());
-  ASSERT_EQ(stats.status, 0) << stats.output;
-  auto at = stats.output.find("bvh_bytes=");
-  ASSERT_NE(at, std::string::npos) << stats.output;
-  auto bvh_bytes = std::stod(stats.output.substr(at + 10));
+  auto stat = [](const std::string& output, const std::string& key) {
+    auto at = output.find(" " + key + "=");
+    return at == std::string::npos ? -1.0 : std::stod(output.substr(at + key.size() + 2));
+  };
+  auto render_stats = [&](const std::string& args) {
+    auto result = run_yscene("render " + scene + " --resolution 32 --quiet --stats " + args +
+                             " --output " + (dir / "free.exr").string());
+    EXPECT_EQ(result.status, 0) << result.output;
+    return result.output;
+  };
+  auto whole  = render_stats("--samples 1 --curve-pieces 1");
+  auto pieced = render_stats("--samples 1 --curve-pieces 4");
+  auto bvh_bytes = stat(pieced, "bvh_bytes"), segments = stat(pieced, "segments");
+  ASSERT_GT(bvh_bytes, 2 * stat(whole, "bvh_bytes")) << pieced << whole;
+  ASSERT_GT(stat(pieced, "curve_pieces"), 1.5 * segments) << pieced;
+  // Without --curve-pieces the plan splits only when the render's rays
+  // repay the build: not 1 spp at 32x32 for 48,000 segments, yes at 256 spp.
+  EXPECT_EQ(stat(render_stats("--samples 1"), "curve_pieces"), segments);
+  EXPECT_GT(stat(render_stats("--samples 256 --time-budget 0"), "curve_pieces"), 1.5 * segments);
   auto image_bytes = 32.0 * 32 * (72 + 12 + 3);  // trace_image_bytes of a 32x32 exr
   auto budget = [&](double bvh) {
     return std::to_string((long long)(scene_bytes + image_bytes + bvh));
   };
-  auto part = (dir / "part.exr").string();
+  auto part  = (dir / "part.exr").string();
   auto fewer = run_yscene("render " + scene + " --samples 2 --sample-range 0:1 --resolution 32 "
-                          "--quiet --max-memory " + budget(0.6 * bvh_bytes) + " --output " + part);
+                          "--curve-pieces 4 --quiet --stats --max-memory " +
+                          budget(0.6 * bvh_bytes) + " --output " + part);
   ASSERT_EQ(fewer.status, 0) << fewer.output;
-  EXPECT_NE(fewer.output.find("building it again with 2 curve pieces"), std::string::npos)
-      << fewer.output;
+  EXPECT_EQ(fewer.output.find("building it again"), std::string::npos) << fewer.output;
+  EXPECT_LT(stat(fewer.output, "bvh_bytes"), 0.6 * bvh_bytes) << fewer.output;
+  EXPECT_GT(stat(fewer.output, "curve_pieces"), segments) << fewer.output;
+  EXPECT_LT(stat(fewer.output, "curve_pieces"), stat(pieced, "curve_pieces")) << fewer.output;
   auto loaded = render_part{};
   auto error  = std::string{};
   ASSERT_TRUE(load_render_part(part, loaded, error)) << error;
-  EXPECT_EQ(loaded.settings.find("pieces 4"), std::string::npos) << loaded.settings;
+  EXPECT_NE(loaded.settings.find("pieces 4 over "), std::string::npos) << loaded.settings;
   auto output = dir / "none.exr";
   auto none   = run_yscene("render " + scene + " --samples 1 --resolution 32 --quiet "
                            "--max-memory " + budget(4096) + " --output " + output.string());

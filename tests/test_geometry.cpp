@@ -773,3 +773,67 @@ TEST(geometry, bvh_memory_budget_refuses_and_fails_cleanly) {
     EXPECT_NE(error.find("memory budget of 1024 bytes"), std::string::npos) << error;
   }
 }
+
+// The curve pieces are planned before the build (plan_curve_pieces): none
+// for a straight strand, none when the rays of the render do not repay the
+// pieces' build (fewer than 6 a segment), all for a long render; within a
+// budget, the most bent segments only, and the build then keeps within it
+// (its peak, the build's temporaries included) and gives Embree the
+// planned number of curves. A curly groom of 2,000 strands (48,000 bent
+// segments).
+TEST(geometry, curve_pieces_are_planned_from_rays_and_budget) {
+  auto style    = hair_style_params{};
+  style.strands = 2000;
+  style.style   = hair_style::curly;
+  auto curly    = make_hair_scene(style, hair_material{});
+  auto straight = scene_data{};
+  straight.shapes.emplace_back();
+  append_catmull_rom_strand(straight.shapes[0], {{1, 0, 0}, {1, 0.5f, 0}, {1, 1, 0}, {1, 1.5f, 0}},
+      {0.02f, 0.02f, 0.02f, 0.02f});
+  straight.instances.push_back({identity3x4f, 0, 0});
+  auto params   = bvh_params{};
+  auto plan     = plan_curve_pieces(straight, params, 1e12, 0);
+  EXPECT_EQ(plan.max_pieces, 1);
+  auto segments = (double)curly.shapes[0].curves.size();
+  plan          = plan_curve_pieces(curly, params, 5 * segments, 0);
+  EXPECT_EQ(plan.segments, (int64_t)segments);
+  EXPECT_FALSE(plan.pays);
+  EXPECT_EQ(plan.max_pieces, 1);
+  EXPECT_EQ(plan.pieces, plan.segments);
+  auto full = plan_curve_pieces(curly, params, 7 * segments, 0);
+  EXPECT_TRUE(full.pays);
+  EXPECT_EQ(full.max_pieces, 4);
+  EXPECT_EQ(full.threshold, 1.0f);
+  EXPECT_GT(full.pieces, (int64_t)(1.5 * segments));
+  // Built as planned: Embree gets the planned curves.
+  auto build = [&](const bvh_piece_plan& plan, double budget) {
+    auto bvh       = scene_bvh{};
+    auto error     = std::string{};
+    params.max_curve_pieces      = plan.max_pieces;
+    params.curve_piece_threshold = plan.threshold;
+    params.max_bytes             = budget;
+    EXPECT_TRUE(make_scene_bvh(bvh, curly, params, error)) << error;
+    auto pieces = bvh.pieces[0].pieces.empty() ? segments : (double)bvh.pieces[0].pieces.size();
+    EXPECT_EQ(pieces, (double)plan.pieces);
+    return bvh;
+  };
+  auto whole_bvh = build(plan, 0), full_bvh = build(full, 0);
+  // Half way between the two: fewer pieces, the most bent first, and the
+  // build fits (the estimate errs on the side of the budget).
+  params.max_curve_pieces      = 4;
+  params.curve_piece_threshold = 1;
+  auto budget = 0.5 * (whole_bvh.build_peak_memory + full_bvh.build_peak_memory);
+  auto half   = plan_curve_pieces(curly, params, 1e12, budget);
+  EXPECT_LE(half.bytes, budget);
+  EXPECT_GT(half.threshold, 1.0f);
+  EXPECT_GT(half.pieces, plan.pieces);
+  EXPECT_LT(half.pieces, full.pieces);
+  auto half_bvh = build(half, budget);
+  EXPECT_LE(half_bvh.build_peak_memory, budget);
+  std::printf("[ figure ] planned pieces: %lld of %lld within %.0f bytes (built peak %lld)\n",
+      (long long)half.pieces, (long long)full.pieces, budget,
+      (long long)half_bvh.build_peak_memory);
+  // A budget the unsplit BVH alone exceeds: no pieces.
+  params.max_curve_pieces = 4;
+  EXPECT_EQ(plan_curve_pieces(curly, params, 1e12, 1024).max_pieces, 1);
+}

@@ -11,6 +11,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstring>
+#include <functional>
 #include <mutex>
 #include <sstream>
 #include <string>
@@ -41,6 +42,7 @@ struct embree_monitor {
   std::shared_ptr<std::atomic<int64_t>> memory  = nullptr;
   int64_t                               limit   = 0;
   std::atomic<bool>                     refused = false;
+  std::atomic<int64_t>                  peak    = 0;  // the most held at once
 };
 
 // Tracks the bytes Embree allocates and refuses, before it is made, an
@@ -54,6 +56,8 @@ static bool embree_memory_callback(void* user, ssize_t bytes, bool post) {
     monitor->refused = true;
     return false;
   }
+  auto peak = monitor->peak.load();
+  while (now > peak && !monitor->peak.compare_exchange_weak(peak, now)) {}
   return true;
 }
 
@@ -148,38 +152,47 @@ static RTCGeometry make_curve_geometry(
   return geometry;
 }
 
-// Pieces of each Bezier segment: as many as make the control polygon's
-// distance from the chord (which bounds the curve's) small against the
-// radius; the distance falls with the square of the number of pieces.
-static bvh_curve_pieces make_curve_pieces(const shape_data& shape, int max_pieces) {
+// The bend of a segment over its diameter: the control polygon's distance
+// from the chord (which bounds the curve's) over twice the largest radius;
+// 0 for a straight segment or one with indices out of range.
+static float segment_bend_ratio(const shape_data& shape, const vec4i& c) {
+  auto count = (int)shape.positions.size();
+  if (glm::any(glm::lessThan(c, vec4i{0})) || glm::any(glm::greaterThanEqual(c, vec4i{count})))
+    return 0;
+  auto& p     = shape.positions;
+  auto  chord = p[c.w] - p[c.x];
+  auto  along = dot(chord, chord) > 0 ? normalize(chord) : vec3f{0, 0, 0};
+  auto  off   = [&](const vec3f& q) {
+    auto d = q - p[c.x];
+    return length(d - dot(d, along) * along);
+  };
+  auto bend   = std::max(off(p[c.y]), off(p[c.z]));
+  auto radius = 0.0f;
+  for (auto k = 0; k < 4; k++)
+    radius = std::max(radius, c[k] < (int)shape.radius.size() ? shape.radius[c[k]] : 0.001f);
+  auto ratio = radius > 0 ? bend / (2 * radius) : 0.0f;
+  return std::isfinite(ratio) ? ratio : 0.0f;
+}
+
+// Pieces of a segment of that ratio: none below the threshold, else as many
+// as make the distance small against the radius (it falls with the square of
+// the number of pieces: about 3 for a quarter turn of a curl).
+static int segment_pieces(float ratio, float threshold, int max_pieces) {
+  if (!(ratio > threshold) || !(ratio > 1) || max_pieces <= 1) return 1;
+  return std::clamp((int)std::ceil(std::sqrt(ratio)), 2, max_pieces);
+}
+
+// Pieces of each Bezier segment, or none when nothing is split.
+static bvh_curve_pieces make_curve_pieces(
+    const shape_data& shape, int max_pieces, float threshold) {
   auto pieces = bvh_curve_pieces{};
   max_pieces  = std::min(max_pieces, 4);  // k and n - 1 take 2 bits each
   if (shape.curves.empty() || max_pieces <= 1 || shape.curves.size() >= (1u << 28))
     return pieces;
-  auto count = (int)shape.positions.size();
   auto split = false;
   for (auto& c : shape.curves) {
-    auto n = 1;
-    if (!glm::any(glm::lessThan(c, vec4i{0})) &&
-        !glm::any(glm::greaterThanEqual(c, vec4i{count}))) {
-      auto& p     = shape.positions;
-      auto  chord = p[c.w] - p[c.x];
-      auto  along = dot(chord, chord) > 0 ? normalize(chord) : vec3f{0, 0, 0};
-      auto  off   = [&](const vec3f& q) {
-        auto d = q - p[c.x];
-        return length(d - dot(d, along) * along);
-      };
-      auto bend   = std::max(off(p[c.y]), off(p[c.z]));
-      auto radius = 0.0f;
-      for (auto k = 0; k < 4; k++)
-        radius = std::max(radius, c[k] < (int)shape.radius.size() ? shape.radius[c[k]] : 0.001f);
-      // One piece per factor 2 of bend over radius, squared (about 3 pieces
-      // for a quarter turn of a curl, 1 for a straight segment).
-      auto ratio = radius > 0 ? bend / (2 * radius) : 0.0f;
-      if (std::isfinite(ratio) && ratio > 1)
-        n = std::clamp((int)std::ceil(std::sqrt(ratio)), 1, max_pieces);
-    }
-    split = split || n > 1;
+    auto n       = segment_pieces(segment_bend_ratio(shape, c), threshold, max_pieces);
+    split        = split || n > 1;
     auto element = (uint32_t)(&c - shape.curves.data());
     for (auto k = 0; k < n; k++) pieces.pieces.push_back(element << 4 | k << 2 | (n - 1));
   }
@@ -190,40 +203,62 @@ static bvh_curve_pieces make_curve_pieces(const shape_data& shape, int max_piece
 // Round Bezier curves from the pieces of each segment: the same polynomial
 // over [k / n, (k + 1) / n] has control points B(a), B(a) + (b - a) B'(a) / 3,
 // B(b) - (b - a) B'(b) / 3, B(b), with the radius as a fourth coordinate.
+// A piece starts on the vertex where the one before it ends (the same
+// segment's, or a strand's previous segment's: the same vertex index), as
+// Embree's consecutive indexing allows: 3 vertices a piece instead of 4.
 static RTCGeometry make_curve_pieces_geometry(RTCDevice device, const shape_data& shape,
     const bvh_curve_pieces& pieces, RTCGeometryType type) {
   auto geometry = rtcNewGeometry(device, type);
   auto npieces  = pieces.pieces.size();
-  auto vertices = (vec4f*)rtcSetNewGeometryBuffer(geometry, RTC_BUFFER_TYPE_VERTEX, 0,
-      RTC_FORMAT_FLOAT4, sizeof(vec4f), npieces * 4);
-  auto indices = (uint32_t*)rtcSetNewGeometryBuffer(geometry, RTC_BUFFER_TYPE_INDEX, 0,
+  auto indices  = (uint32_t*)rtcSetNewGeometryBuffer(geometry, RTC_BUFFER_TYPE_INDEX, 0,
       RTC_FORMAT_UINT, sizeof(uint32_t), npieces);
-  if (!vertices || !indices) return release_unbuilt(geometry);
+  if (!indices) return release_unbuilt(geometry);
   auto count = (int)shape.positions.size();
+  auto valid = [&](const vec4i& c) {
+    return !glm::any(glm::lessThan(c, vec4i{0})) &&
+           !glm::any(glm::greaterThanEqual(c, vec4i{count}));
+  };
+  auto next = (size_t)0;
   for (size_t i = 0; i < npieces; i++) {
-    auto  c       = shape.curves[pieces.pieces[i] >> 4];
-    auto  k       = (int)(pieces.pieces[i] >> 2 & 3);
-    auto  n       = (int)(pieces.pieces[i] & 3) + 1;
-    indices[i]    = (uint32_t)(i * 4);
-    if (glm::any(glm::lessThan(c, vec4i{0})) || glm::any(glm::greaterThanEqual(c, vec4i{count}))) {
-      for (auto j = 0; j < 4; j++) vertices[i * 4 + j] = {0, 0, 0, 0};
+    auto shares = false;
+    if (i > 0) {
+      auto element = pieces.pieces[i] >> 4, previous = pieces.pieces[i - 1] >> 4;
+      auto& c = shape.curves[element];
+      shares  = valid(c) && (element == previous || (valid(shape.curves[previous]) &&
+                                                        shape.curves[previous].w == c.x));
+    }
+    indices[i] = (uint32_t)(shares ? next - 1 : next);
+    next       = indices[i] + 4;
+  }
+  auto vertices = (vec4f*)rtcSetNewGeometryBuffer(geometry, RTC_BUFFER_TYPE_VERTEX, 0,
+      RTC_FORMAT_FLOAT4, sizeof(vec4f), next);
+  if (!vertices) return release_unbuilt(geometry);
+  for (size_t i = 0; i < npieces; i++) {
+    auto  c = shape.curves[pieces.pieces[i] >> 4];
+    auto  k = (int)(pieces.pieces[i] >> 2 & 3);
+    auto  n = (int)(pieces.pieces[i] & 3) + 1;
+    auto* v = vertices + indices[i];
+    if (!valid(c)) {
+      for (auto j = 0; j < 4; j++) v[j] = {0, 0, 0, 0};
       continue;
     }
     auto q = std::array<vec4f, 4>{fiber_vertex(shape, c.x), fiber_vertex(shape, c.y),
         fiber_vertex(shape, c.z), fiber_vertex(shape, c.w)};
     auto point = [&](float u) {
-      auto v = 1 - u;
-      return v * v * v * q[0] + 3 * v * v * u * q[1] + 3 * v * u * u * q[2] + u * u * u * q[3];
+      auto w = 1 - u;
+      return w * w * w * q[0] + 3 * w * w * u * q[1] + 3 * w * u * u * q[2] + u * u * u * q[3];
     };
     auto derivative = [&](float u) {
-      auto v = 1 - u;
-      return 3 * v * v * (q[1] - q[0]) + 6 * v * u * (q[2] - q[1]) + 3 * u * u * (q[3] - q[2]);
+      auto w = 1 - u;
+      return 3 * w * w * (q[1] - q[0]) + 6 * w * u * (q[2] - q[1]) + 3 * u * u * (q[3] - q[2]);
     };
+    // A shared first vertex is written again with the same value: the
+    // previous piece ended on B(k / n) computed alike, or on the same vertex.
     auto a = (float)k / n, b = (float)(k + 1) / n, d = (b - a) / 3;
-    vertices[i * 4 + 0] = k == 0 ? q[0] : point(a);
-    vertices[i * 4 + 1] = point(a) + d * derivative(a);
-    vertices[i * 4 + 2] = point(b) - d * derivative(b);
-    vertices[i * 4 + 3] = k == n - 1 ? q[3] : point(b);
+    v[0] = k == 0 ? q[0] : point(a);
+    v[1] = point(a) + d * derivative(a);
+    v[2] = point(b) - d * derivative(b);
+    v[3] = k == n - 1 ? q[3] : point(b);
   }
   return geometry;
 }
@@ -244,29 +279,52 @@ static std::vector<uint32_t> make_fiber_caps(const shape_data& shape) {
         if (element[k] < 0 || element[k] >= count) return false;
       return true;
     };
-    // Every segment end with its position's bits (+0 for -0), sorted so
-    // that ends at one position are neighbours.
+    // Every segment end with its position's bits (+0 for -0). An end on the
+    // same vertex as its neighbour element's (strands) is joined; the others
+    // are sorted so that ends at one position are neighbours, and are then
+    // looked up at every joint's position: only then is an end alone.
     struct segment_end {
       std::array<uint32_t, 3> position = {};
       uint32_t                packed   = 0;
     };
     auto last = (int)elements[0].length() - 1;
+    auto bits = [&](int vertex) {
+      auto position = p[vertex] + vec3f{0, 0, 0};
+      auto result   = std::array<uint32_t, 3>{};
+      std::memcpy(result.data(), &position, sizeof(result));
+      return result;
+    };
+    auto joined = [&](int i, int end) {
+      auto j = end ? i + 1 : i - 1;
+      if (j < 0 || j >= (int)elements.size() || !valid(elements[j])) return false;
+      return end ? elements[j][0] == elements[i][last] : elements[j][last] == elements[i][0];
+    };
     auto ends = std::vector<segment_end>{};
     for (auto i = 0; i < (int)elements.size(); i++) {
       if (!valid(elements[i])) continue;
-      for (auto end = 0; end < 2; end++) {
-        auto position = p[elements[i][end ? last : 0]] + vec3f{0, 0, 0};
-        auto bits     = std::array<uint32_t, 3>{};
-        std::memcpy(bits.data(), &position, sizeof(bits));
-        ends.push_back({bits, (uint32_t)i << 1 | end});
+      for (auto end = 0; end < 2; end++)
+        if (!joined(i, end))
+          ends.push_back({bits(elements[i][end ? last : 0]), (uint32_t)i << 1 | end});
+    }
+    auto by_position = [](const segment_end& a, const segment_end& b) {
+      return a.position < b.position;
+    };
+    std::sort(ends.begin(), ends.end(), by_position);
+    auto alone = std::vector<bool>(ends.size());
+    for (size_t k = 0; k < ends.size(); k++)
+      alone[k] = (k == 0 || ends[k - 1].position != ends[k].position) &&
+                 (k + 1 == ends.size() || ends[k + 1].position != ends[k].position);
+    if (!ends.empty()) {
+      for (auto i = 0; i < (int)elements.size(); i++) {
+        if (!valid(elements[i]) || !joined(i, 1)) continue;
+        auto joint = segment_end{bits(elements[i][last]), 0};
+        auto found = std::lower_bound(ends.begin(), ends.end(), joint, by_position);
+        if (found != ends.end() && found->position == joint.position)
+          alone[found - ends.begin()] = false;
       }
     }
-    std::sort(ends.begin(), ends.end(),
-        [](const segment_end& a, const segment_end& b) { return a.position < b.position; });
     for (size_t k = 0; k < ends.size(); k++) {
-      auto alone = (k == 0 || ends[k - 1].position != ends[k].position) &&
-                   (k + 1 == ends.size() || ends[k + 1].position != ends[k].position);
-      if (!alone) continue;
+      if (!alone[k]) continue;
       auto fiber = eval_fiber_end(shape, (int)(ends[k].packed >> 1), (int)(ends[k].packed & 1));
       if (fiber_vertex(shape, fiber.vertex).w <= 0 || length(fiber.outward) == 0) continue;
       caps.push_back(ends[k].packed);
@@ -465,7 +523,8 @@ bool make_scene_bvh(scene_bvh& bvh, const scene_data& scene, const bvh_params& p
   bvh.caps.resize(scene.shapes.size());
   for (auto i = 0; i < (int)scene.shapes.size(); i++) {
     if (users[i] == 0) continue;
-    bvh.pieces[i] = make_curve_pieces(scene.shapes[i], params.max_curve_pieces);
+    bvh.pieces[i] = make_curve_pieces(
+        scene.shapes[i], params.max_curve_pieces, params.curve_piece_threshold);
     bvh.caps[i]   = make_fiber_caps(scene.shapes[i]);
   }
   for (auto& instance : scene.instances) {
@@ -504,6 +563,7 @@ bool make_scene_bvh(scene_bvh& bvh, const scene_data& scene, const bvh_params& p
   }
   rtcCommitScene(top);
   bvh.peak_memory   = memory->load();
+  bvh.build_peak_memory = monitor->peak.load();
   bvh.build_seconds = std::chrono::duration<double>(
       std::chrono::steady_clock::now() - start).count();
   if (monitor->refused || !errors->message.empty()) {
@@ -516,6 +576,79 @@ bool make_scene_bvh(scene_bvh& bvh, const scene_data& scene, const bvh_params& p
     return false;
   }
   return true;
+}
+
+// The plan's cost model, measured with Embree 3.13 (AVX2, 2 threads). At
+// the peak of its build Embree holds up to 190 bytes a round Bezier curve
+// (100 compact): 175-190 (95-98) on a groom of 48,000 segments, 133 (54) on
+// the 3.3M-segment curly stand-in of issue 22, so the plan errs on the side
+// of the budget. A piece adds 3 vertices, an index and its entry in
+// bvh_curve_pieces; its build takes 2.4 CPU-us; splitting a share s of the
+// segments saves about 0.4 s CPU-us a ray (1.05 to 1.26 M Embree rays/s on
+// the stand-in for 0.81 more pieces a segment). So the pieces repay their
+// build when the render traces more than 2.4 / 0.4 = 6 rays a segment.
+static const double embree_bytes_per_curve         = 190;
+static const double embree_compact_bytes_per_curve = 100;
+static const double piece_bytes                    = 3 * sizeof(vec4f) + 2 * sizeof(uint32_t);
+static const double payback_rays_per_segment       = 6;
+
+bvh_piece_plan plan_curve_pieces(const scene_data& scene, const bvh_params& params,
+    double planned_rays, double max_bytes) {
+  auto plan       = bvh_piece_plan{};
+  plan.max_pieces = std::clamp(params.max_curve_pieces, 1, 4);
+  plan.threshold  = params.curve_piece_threshold;
+  auto per_curve  = params.compact ? embree_compact_bytes_per_curve : embree_bytes_per_curve;
+  // The split segments' bend ratios (and pieces) of the shapes in use.
+  auto used = std::vector<bool>(scene.shapes.size(), false);
+  for (auto& instance : scene.instances)
+    if (instance.shape >= 0 && instance.shape < (int)used.size()) used[instance.shape] = true;
+  auto ratios = std::vector<float>{};
+  for (auto i = 0; i < (int)scene.shapes.size(); i++) {
+    auto& shape = scene.shapes[i];
+    if (!used[i]) continue;
+    auto elements = shape.curves.size() + shape.lines.size() + shape.triangles.size();
+    plan.bytes += per_curve * elements + sizeof(vec4f) * shape.positions.size() +
+                  sizeof(uint32_t) * elements;
+    plan.segments += (int64_t)shape.curves.size();
+    plan.pieces += (int64_t)shape.curves.size();
+    if (plan.max_pieces <= 1 || shape.curves.size() >= (1u << 28)) continue;
+    for (auto& c : shape.curves) {
+      auto ratio = segment_bend_ratio(shape, c);
+      if (segment_pieces(ratio, plan.threshold, plan.max_pieces) > 1) ratios.push_back(ratio);
+    }
+  }
+  auto extra = [&](float ratio) {
+    return segment_pieces(ratio, plan.threshold, plan.max_pieces) - 1;
+  };
+  auto extra_pieces = (int64_t)0;
+  for (auto ratio : ratios) extra_pieces += extra(ratio);
+  auto none = [&]() {
+    plan.max_pieces = 1;
+    return plan;
+  };
+  if (extra_pieces == 0) return none();
+  plan.pays = planned_rays >= payback_rays_per_segment * (double)plan.segments;
+  if (!plan.pays) return none();
+  // Within the budget: the most bent segments first.
+  auto bytes_per_piece = per_curve + piece_bytes;
+  auto room = max_bytes > 0 ? (max_bytes - plan.bytes) / bytes_per_piece : 1e30;
+  if ((double)extra_pieces > room) {
+    std::sort(ratios.begin(), ratios.end(), std::greater<float>{});
+    auto fitted = (int64_t)0;
+    auto taken  = (size_t)0;
+    while (taken < ratios.size() && (double)(fitted + extra(ratios[taken])) <= room)
+      fitted += extra(ratios[taken++]);
+    // Equal ratios split alike: the threshold excludes the whole tie.
+    if (taken < ratios.size()) {
+      while (taken > 0 && ratios[taken - 1] == ratios[taken]) fitted -= extra(ratios[--taken]);
+      plan.threshold = ratios[taken];
+    }
+    extra_pieces = fitted;
+    if (extra_pieces == 0) return none();
+  }
+  plan.pieces += extra_pieces;
+  plan.bytes += bytes_per_piece * (double)extra_pieces;
+  return plan;
 }
 
 bool is_traceable_ray(const ray3f& ray) {

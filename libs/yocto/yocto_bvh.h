@@ -62,6 +62,10 @@ struct bvh_params {
   // (the same curve; 1 to 4), fewer for straighter ones, none for straight
   // ones: Embree's bounds of a bent segment are loose, and rays test it often.
   int max_curve_pieces = 4;
+  // A segment is split when the bend of its control polygon over its
+  // diameter exceeds this (1: every segment the pieces tighten; larger: only
+  // the most bent; plan_curve_pieces chooses it from a budget).
+  float curve_piece_threshold = 1;
   std::string embree_config = "";  // Embree device configuration, e.g. "verbose=2"
   // Most bytes Embree may hold at once (0: no limit): an allocation beyond it
   // is refused and the build fails with over_budget set (the caller may try
@@ -77,7 +81,9 @@ struct bvh_curve_pieces {
 };
 
 // Embree handles are shared pointers so that the struct copies and frees
-// itself; `memory` is what Embree allocated for this scene, in bytes.
+// itself; `memory` is what Embree holds for this scene, in bytes,
+// `peak_memory` what it held after the build and `build_peak_memory` the
+// most it held at once (the build's temporaries too).
 struct scene_bvh {
   std::shared_ptr<void>              device = nullptr;
   std::shared_ptr<void>              scene  = nullptr;
@@ -88,6 +94,7 @@ struct scene_bvh {
   std::vector<int>                   instance_shapes = {};  // per instance
   std::shared_ptr<std::atomic<int64_t>> memory      = nullptr;
   int64_t                                 peak_memory = 0;
+  int64_t                                 build_peak_memory = 0;
   double                                  build_seconds = 0;
   bool                                    over_budget = false;  // failed on max_bytes
 };
@@ -103,6 +110,24 @@ struct scene_intersection {
 // Builds the BVH; returns false with a message on an Embree error.
 bool make_scene_bvh(scene_bvh& bvh, const scene_data& scene, const bvh_params& params,
     std::string& error);
+
+// How far to split bent segments, decided before the build from the scene
+// (how many segments, how bent), the rays the render will trace and the
+// memory the BVH may take. Pieces cost memory and build time per piece and
+// save ray time in proportion to the share of segments split, so they pay
+// only when the render traces enough rays per segment (a few spp on a
+// large groom do not repay the build); and they are given to the most bent
+// segments first, as far as `max_bytes` allows (0: no limit).
+struct bvh_piece_plan {
+  int     max_pieces = 1;     // 1: no segment is split
+  float   threshold  = 1;     // bvh_params::curve_piece_threshold
+  int64_t segments   = 0;     // Bezier segments of the scene's used shapes
+  int64_t pieces     = 0;     // what Embree gets for them under the plan
+  double  bytes      = 0;     // estimated BVH bytes under the plan
+  bool    pays       = true;  // do the planned rays repay the pieces' build?
+};
+bvh_piece_plan plan_curve_pieces(const scene_data& scene, const bvh_params& params,
+    double planned_rays, double max_bytes);
 
 // The instruction set of Embree's kernels for a device configuration: the
 // best one this CPU has (sse2, sse4.2, avx, avx2, avx512), capped by an
