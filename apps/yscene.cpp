@@ -41,7 +41,7 @@ static int run_main(int argc, const char** argv) {
     auto code = app.exit(e);
     return code == 0 ? 0 : 1;
   }
-  if (!max_memory.empty() && !parse_memory_size(max_memory, load_memory_limit))
+  if (!max_memory.empty() && !parse_memory_size(max_memory, memory_limit))
     return print_error("--max-memory " + max_memory +
                        ": expected a number of bytes, optionally with a K, M or G suffix (e.g. 4G)");
 

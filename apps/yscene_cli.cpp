@@ -55,6 +55,13 @@ void add_max_memory_option(CLI::App* command, std::string& max_memory) {
       "physical memory, or of ulimit -v if lower)");
 }
 
+double memory_limit = default_memory_limit();
+
+pbrt_params with_memory_limit(pbrt_params params) {
+  params.max_memory = memory_limit;
+  return params;
+}
+
 bool parse_memory_size(const std::string& text, double& bytes) {
   auto end   = (char*)nullptr;
   auto value = std::strtod(text.c_str(), &end);
@@ -73,16 +80,4 @@ bool save_render_image(const std::string& filename, const texture_data& image,
     bool replace) {
   if (!layers.empty()) return save_image_layers(filename, image, layers, error, replace);
   return save_image(filename, image, error, exposure, replace);
-}
-
-bool load_any_scene(const std::string& filename, scene_data& scene, std::string& error,
-    const pbrt_params& params) {
-  auto extension = path_extension(filename);
-  if (extension == ".pbrt" || extension == ".gz") {
-    return load_pbrt_scene(filename, scene, error, params);
-  } else if (extension == ".hair") {
-    return load_hair_scene(filename, scene, error, params);
-  } else {
-    return load_scene(filename, scene, error);
-  }
 }

@@ -14,8 +14,12 @@
 #include <chrono>
 #include <string>
 #include <vector>
+#include <yocto/yocto_fileio.h>
 #include <yocto/yocto_hairgen.h>
+#include <yocto/yocto_hairio.h>
+#include <yocto/yocto_image.h>
 #include <yocto/yocto_pbrtio.h>
+#include <yocto/yocto_ply.h>
 #include <yocto/yocto_sceneio.h>
 #include <yocto/yocto_trace.h>
 
@@ -51,6 +55,14 @@ inline Enum enum_from_name(const std::array<std::string, size>& names, const std
 // string holds it, whichever command was given.
 void add_max_memory_option(CLI::App* command, std::string& max_memory);
 
+// The memory limit of every load, render and merge: --max-memory once main
+// has parsed it, the libraries' default otherwise. The one place the app
+// keeps it; commands pass it on to the loaders.
+extern double memory_limit;
+
+// Import options with the loads' limit set to memory_limit.
+yocto::pbrt_params with_memory_limit(yocto::pbrt_params params = {});
+
 // Bytes from --max-memory: a positive number, plain or with a K, M, G or T
 // suffix (powers of 1024), e.g. 4G or 1.5G.
 bool parse_memory_size(const std::string& text, double& bytes);
@@ -60,10 +72,6 @@ bool parse_memory_size(const std::string& text, double& bytes);
 bool save_render_image(const std::string& filename, const yocto::texture_data& image,
     const std::vector<yocto::image_layer>& layers, std::string& error, float exposure,
     bool replace = true);
-
-// Loads a scene by extension: json, pbrt, or a Cem Yuksel .hair model.
-bool load_any_scene(const std::string& filename, yocto::scene_data& scene, std::string& error,
-    const yocto::pbrt_params& params);
 
 // -----------------------------------------------------------------------------
 // RENDER

@@ -22,7 +22,7 @@ static int convert_scene(const std::string& input, const std::string& output,
   auto scene = scene_data{};
   auto error = std::string{};
   auto start = std::chrono::steady_clock::now();
-  if (!load_any_scene(input, scene, error, params)) return print_error(error);
+  if (!load_any_scene(input, scene, error, with_memory_limit(params))) return print_error(error);
   if (params.curves_as_lines) {
     for (auto& shape : scene.shapes)
       if (!shape.curves.empty()) shape = curves_to_lines(shape, params.segments);

@@ -3,14 +3,10 @@
 // them, optionally placed where a scene's camera looks.
 //
 
-#include <unistd.h>
-
 #include <algorithm>
-#include <cctype>
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
-#include <filesystem>
 
 #include "yscene_cli.h"
 
@@ -43,60 +39,16 @@ static void add_hair_parameter_option(
       ->check(CLI::Validator(in_range, ""));
 }
 
-// Offset of pbrt's WorldBegin in a scene's text (comments and strings
-// skipped), or npos.
-static size_t find_world_begin(const std::string& text) {
-  for (auto i = (size_t)0; i < text.size(); i++) {
-    if (text[i] == '#') {
-      while (i < text.size() && text[i] != '\n') i++;
-    } else if (text[i] == '"') {
-      i++;
-      while (i < text.size() && text[i] != '"') i++;
-    } else if (text.compare(i, 10, "WorldBegin") == 0 &&
-               (i == 0 || std::isspace((unsigned char)text[i - 1]))) {
-      return i;
-    }
-  }
-  return std::string::npos;
-}
-
-// The first camera of a scene. For a plain .pbrt file only the part before
-// WorldBegin is read (through a temporary copy), so the camera of a scene
-// whose world includes are missing, the stand-ins' use case, still loads.
+// The first camera of a scene. A .pbrt file is read only up to WorldBegin,
+// so the camera of a scene whose world includes are missing, the stand-ins'
+// use case, still loads; warnings (e.g. an unsupported camera type) go to
+// stderr, as convert's do.
 static bool load_first_camera(const std::string& filename, camera_data& camera,
     std::string& error) {
+  if (path_extension(filename) == ".pbrt")
+    return load_pbrt_camera(filename, camera, error, with_memory_limit());
   auto scene = scene_data{};
-  if (path_extension(filename) == ".pbrt") {
-    auto text = std::string{};
-    if (!load_text(filename, text, error)) return false;
-    auto world = find_world_begin(text);
-    if (world == std::string::npos) return error = filename + ": no WorldBegin", false;
-    // The copy goes to a private folder (mode 0700, unpredictable name) of
-    // the system's temporary folder: no other user can plant a link there.
-    auto folder = (std::filesystem::temp_directory_path() / "yscene-XXXXXX").string();
-    if (!mkdtemp(folder.data()))
-      return error = folder + ": cannot create a temporary folder", false;
-    auto temporary = folder + "/camera.pbrt";
-    auto ok = save_text(temporary, text.substr(0, world) + "WorldBegin\n", error);
-    auto warnings = std::vector<std::string>{};
-    auto params        = pbrt_params{};
-    params.allow_empty = true;  // the world is cut off: a camera alone
-    if (ok) ok = load_pbrt_scene(temporary, scene, error, params, &warnings);
-    std::remove(temporary.c_str());
-    rmdir(folder.c_str());
-    // Messages name the user's file, not the temporary copy; warnings (e.g.
-    // an unsupported camera type) go to stderr, as convert's do.
-    auto rename = [&](std::string message) {
-      auto at = message.find(temporary);
-      if (at != std::string::npos) message.replace(at, temporary.size(), filename);
-      return message;
-    };
-    for (auto& warning : warnings)
-      std::fprintf(stderr, "warning: %s\n", rename(warning).c_str());
-    if (!ok) return error = rename(error), false;
-  } else if (!load_any_scene(filename, scene, error, {})) {
-    return false;
-  }
+  if (!load_any_scene(filename, scene, error, with_memory_limit())) return false;
   if (scene.cameras.empty()) return error = filename + ": no camera", false;
   camera = scene.cameras[0];
   return true;

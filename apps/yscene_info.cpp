@@ -44,7 +44,7 @@ int run_info(const info_options& options) {
   auto& filename = options.scene;
   auto  scene    = scene_data{};
   auto  error    = std::string{};
-  if (!load_any_scene(filename, scene, error, {})) return print_error(error);
+  if (!load_any_scene(filename, scene, error, with_memory_limit())) return print_error(error);
   auto triangles = (size_t)0, lines = (size_t)0, curves = (size_t)0, vertices = (size_t)0;
   auto bytes = (size_t)0;
   for (auto& shape : scene.shapes) {

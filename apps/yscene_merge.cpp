@@ -60,7 +60,7 @@ int run_merge(const merge_options& options) {
   };
   for (auto& filename : options.parts) {
     auto part = render_part{};
-    if (!load_render_part(filename, part, error)) return print_error(error);
+    if (!load_render_part(filename, part, error, memory_limit)) return print_error(error);
     if (ranges.empty()) {
       // Fail before the work if the output cannot be written.
       auto pixel_bytes = options.part ? render_part_pixel_bytes + part.extra * render_part_extra_bytes

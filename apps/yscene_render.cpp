@@ -276,7 +276,8 @@ static int render_scene(const render_options& options, trace_params params,
   auto start    = std::chrono::steady_clock::now();
   auto scene    = scene_data{};
   auto error = std::string{};
-  if (!load_any_scene(options.scene, scene, error, {})) return print_error(error);
+  if (!load_any_scene(options.scene, scene, error, with_memory_limit()))
+    return print_error(error);
   if (!make_output_directory(options.output, error)) return print_error(error);
   add_missing_camera(scene);
   if (options.curves == "lines") {
@@ -309,7 +310,7 @@ static int render_scene(const render_options& options, trace_params params,
   if (!check_load_memory(options.scene,
           "a render at resolution " + std::to_string(params.resolution) + from + ", " +
               std::to_string(size.x) + "x" + std::to_string(size.y) + " pixels,",
-          trace_image_bytes(scene, params), error))
+          trace_image_bytes(scene, params), memory_limit, error))
     return print_error(error);
   if (!check_render_output(options, params, error)) return print_error(error);
   auto load_time = seconds_since(start);
@@ -331,7 +332,7 @@ static int render_scene(const render_options& options, trace_params params,
   auto scene_bytes = 0.0;
   for (auto& shape : scene.shapes) scene_bytes += shape_memory(shape);
   for (auto& texture : scene.textures) scene_bytes += texture.pixels.size() * sizeof(vec3f);
-  bvh_params_.max_bytes = load_memory_limit - scene_bytes - trace_image_bytes(scene, params);
+  bvh_params_.max_bytes = memory_limit - scene_bytes - trace_image_bytes(scene, params);
   if (!(bvh_params_.max_bytes > 0))
     return print_error(options.scene + ": the scene and the image leave no memory for the "
                                        "BVH within the memory budget (raise --max-memory)");

@@ -10,7 +10,8 @@
 #include <OpenImageIO/imageio.h>
 #include <signal.h>
 #include <unistd.h>
-#include <yocto/yocto_sceneio.h>
+#include <yocto/yocto_image.h>
+#include <yocto/yocto_ply.h>
 
 #include <cerrno>
 #include <cstdint>
@@ -22,8 +23,9 @@
 
 namespace yocto_fuzz {
 
-// The budget of one load: checked allocations stay well under libFuzzer's
-// -rss_limit_mb=2048, with room for the sanitizers' own memory.
+// The budget of one load, passed to every loader: checked allocations stay
+// well under libFuzzer's -rss_limit_mb=2048, with room for the sanitizers'
+// own memory.
 inline constexpr double fuzz_memory_limit = 512.0 * (1 << 20);
 
 // Stops the run on a problem of the harness itself (not of the input).
@@ -120,10 +122,9 @@ inline void report_load(bool ok, const std::string& error) {
   if (verbose) std::fprintf(stderr, "%s\n", ok ? "loaded" : error.c_str());
 }
 
-// Settings every target starts with: the memory budget, and images read on
-// the fuzzing thread alone (no thread pool to keep between inputs).
+// Settings every target starts with: images read on the fuzzing thread
+// alone (no thread pool to keep between inputs).
 inline void initialize_fuzzing() {
-  yocto::load_memory_limit = fuzz_memory_limit;
   OIIO::attribute("threads", 1);
   OIIO::attribute("exr_threads", 1);
 }

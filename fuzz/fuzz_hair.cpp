@@ -2,7 +2,7 @@
 // Fuzzes the loader of Cem Yuksel's .hair models: the input is the file.
 //
 
-#include <yocto/yocto_pbrtio.h>
+#include <yocto/yocto_hairio.h>
 
 #include "fuzz_common.h"
 
@@ -19,7 +19,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   auto shape = yocto::shape_data{};
   auto error = std::string{};
   auto color = yocto::vec3f{0, 0, 0};
-  report_load(yocto::load_hair_model(filename, shape, error, &color), error);
+  report_load(yocto::load_hair_model(filename, shape, error, &color, fuzz_memory_limit), error);
   std::remove(filename.c_str());
   return 0;
 }

@@ -4,7 +4,7 @@
 // others when the data does not match), the rest is the file.
 //
 
-#include <yocto/yocto_sceneio.h>
+#include <yocto/yocto_image.h>
 
 #include "fuzz_common.h"
 
@@ -27,7 +27,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   write_file(filename, data + 1, size - 1);
   auto image = yocto::texture_data{};
   auto error = std::string{};
-  report_load(yocto::load_image(filename, image, error), error);
+  report_load(yocto::load_image(filename, image, error, fuzz_memory_limit), error);
   std::remove(filename.c_str());
   return 0;
 }

@@ -22,7 +22,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   auto scene    = yocto::scene_data{};
   auto error    = std::string{};
   auto warnings = std::vector<std::string>{};
-  report_load(yocto::load_scene(filename, scene, error, &warnings), error);
+  report_load(yocto::load_scene(filename, scene, error, &warnings, fuzz_memory_limit), error);
   std::remove(filename.c_str());
   return 0;
 }

@@ -53,10 +53,12 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     write_gzip_file(gzipped, included, end - included);
   }
 
-  auto scene    = yocto::scene_data{};
-  auto error    = std::string{};
-  auto warnings = std::vector<std::string>{};
-  report_load(yocto::load_pbrt_scene(filename, scene, error, {}, &warnings), error);
+  auto scene        = yocto::scene_data{};
+  auto error        = std::string{};
+  auto warnings     = std::vector<std::string>{};
+  auto params       = yocto::pbrt_params{};
+  params.max_memory = fuzz_memory_limit;
+  report_load(yocto::load_pbrt_scene(filename, scene, error, params, &warnings), error);
   for (auto& name : {filename, plain, gzipped}) std::remove(name.c_str());
   return 0;
 }

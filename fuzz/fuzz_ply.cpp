@@ -2,7 +2,7 @@
 // Fuzzes the PLY shape loader: the input is the file.
 //
 
-#include <yocto/yocto_sceneio.h>
+#include <yocto/yocto_ply.h>
 
 #include "fuzz_common.h"
 
@@ -18,7 +18,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   write_file(filename, data, size);
   auto shape = yocto::shape_data{};
   auto error = std::string{};
-  report_load(yocto::load_shape(filename, shape, error), error);
+  report_load(yocto::load_shape(filename, shape, error, fuzz_memory_limit), error);
   std::remove(filename.c_str());
   return 0;
 }

@@ -9,7 +9,7 @@
 
 #include <gtest/gtest.h>
 #include <unistd.h>
-#include <yocto/yocto_pbrtio.h>
+#include <yocto/yocto_hairio.h>
 #include <yocto/yocto_sampling.h>
 #include <yocto/yocto_shading.h>
 #include <yocto/yocto_trace.h>
@@ -1005,7 +1005,7 @@ TEST(groom, per_point_colours_survive_curves_as_lines) {
   auto colors  = std::vector<std::vector<vec3f>>{
       {{0.2f, 0.1f, 0.05f}, {0.6f, 0.5f, 0.3f}, {0.9f, 0.8f, 0.7f}}};
   write_hair_file(file.path, strands, colors);
-  auto params            = pbrt_params{};
+  auto params            = hair_params{};
   params.curves_as_lines = true;
   auto scene             = scene_data{};
   auto error             = std::string{};

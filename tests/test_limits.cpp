@@ -12,6 +12,7 @@
 #include <sys/resource.h>
 #include <sys/wait.h>
 #include <unistd.h>
+#include <yocto/yocto_image.h>
 
 #include <cstdint>
 #include <filesystem>
@@ -19,7 +20,7 @@
 #include <vector>
 
 #include "run_yscene.h"
-#include "test_sceneio.h"
+#include "test_io.h"
 
 using namespace yocto;
 using namespace yocto_test;

@@ -1,113 +1,17 @@
 //
 // Tests of Yocto/PbrtIO: the pbrt tokenizer and parser (each directive,
-// parameter type, both syntaxes, includes), bad input, and the .hair format.
-// Scenes are written to a temporary directory at test time.
+// parameter type, both syntaxes, includes), bad input, the camera alone and
+// the pbrt curves writer. Scenes are written to a temporary directory at
+// test time.
 //
 
-#include <gtest/gtest.h>
 #include <sys/stat.h>
-#include <unistd.h>
-#include <yocto/yocto_pbrtio.h>
-#include <yocto/yocto_sceneio.h>
-#include <zlib.h>
+#include <yocto/yocto_image.h>
+#include <yocto/yocto_ply.h>
 
-#include <cstdio>
-#include <filesystem>
-#include <fstream>
 #include <random>
 
-using namespace yocto;
-namespace fs = std::filesystem;
-
-// -----------------------------------------------------------------------------
-// HELPERS
-// -----------------------------------------------------------------------------
-
-// A fresh directory per test, removed at the end.
-struct temp_dir {
-  fs::path path;
-  temp_dir() {
-    auto info = ::testing::UnitTest::GetInstance()->current_test_info();
-    path      = fs::temp_directory_path() / ("yocto_pbrtio_" + std::to_string(getpid()) +
-                                        "_" + info->name());
-    fs::remove_all(path);
-    fs::create_directories(path);
-  }
-  ~temp_dir() { fs::remove_all(path); }
-  std::string operator/(const std::string& name) const { return (path / name).string(); }
-};
-
-static void write_text(const std::string& filename, const std::string& text) {
-  fs::create_directories(fs::path(filename).parent_path());
-  auto stream = std::ofstream(filename, std::ios::binary);
-  stream << text;
-}
-
-static void write_gz(const std::string& filename, const std::string& text) {
-  fs::create_directories(fs::path(filename).parent_path());
-  auto file = gzopen(filename.c_str(), "wb");
-  ASSERT_NE(file, nullptr);
-  ASSERT_EQ(gzwrite(file, text.data(), (unsigned)text.size()), (int)text.size());
-  ASSERT_EQ(gzclose(file), Z_OK);
-}
-
-// Writes `text` as dir/scene.pbrt and loads it.
-static bool load_text(const temp_dir& dir, const std::string& text, scene_data& scene,
-    std::string& error, std::vector<std::string>* warnings = nullptr,
-    const pbrt_params& params = {}) {
-  write_text(dir / "scene.pbrt", text);
-  auto local_warnings = std::vector<std::string>{};
-  return load_pbrt_scene(
-      dir / "scene.pbrt", scene, error, params, warnings ? warnings : &local_warnings);
-}
-
-static bool contains(const std::string& text, const std::string& part) {
-  return text.find(part) != std::string::npos;
-}
-
-static bool any_contains(const std::vector<std::string>& texts, const std::string& part) {
-  for (auto& text : texts)
-    if (contains(text, part)) return true;
-  return false;
-}
-
-static void expect_near(const vec3f& a, const vec3f& b, float tolerance = 1e-5f) {
-  EXPECT_NEAR(a.x, b.x, tolerance);
-  EXPECT_NEAR(a.y, b.y, tolerance);
-  EXPECT_NEAR(a.z, b.z, tolerance);
-}
-
-// A cubic Bezier curve in pbrt syntax.
-static std::string curve_text(const vec3f& p0, const vec3f& p1, const vec3f& p2,
-    const vec3f& p3, float w0, float w1, const char* point_type = "point3") {
-  char buffer[512];
-  std::snprintf(buffer, sizeof(buffer),
-      "Shape \"curve\" \"%s P\" [ %g %g %g %g %g %g %g %g %g %g %g %g ] "
-      "\"float width0\" [ %g ] \"float width1\" [ %g ] \"string type\" \"cylinder\"\n",
-      point_type, p0.x, p0.y, p0.z, p1.x, p1.y, p1.z, p2.x, p2.y, p2.z, p3.x, p3.y, p3.z, w0,
-      w1);
-  return buffer;
-}
-
-// A few strands of `segments` chained curves each: stand-in geometry.
-static std::string strands_text(int strands, int segments, const char* point_type,
-    const vec3f& origin = {0, 0, 0}) {
-  auto text = std::string{};
-  for (auto s = 0; s < strands; s++) {
-    for (auto k = 0; k < segments; k++) {
-      auto base = origin + vec3f{0.1f * s, 0.3f * k, 0};
-      text += curve_text(base, base + vec3f{0.02f, 0.1f, 0}, base + vec3f{-0.02f, 0.2f, 0},
-          base + vec3f{0, 0.3f, 0}, 0.01f, 0.008f, point_type);
-    }
-  }
-  return text;
-}
-
-static int count_curves(const scene_data& scene) {
-  auto count = 0;
-  for (auto& shape : scene.shapes) count += (int)shape.curves.size();
-  return count;
-}
+#include "test_pbrtio.h"
 
 // -----------------------------------------------------------------------------
 // LEXICAL DETAILS AND PARAMETERS
@@ -765,17 +669,6 @@ TEST(pbrtio, nested_and_gzip_includes_relative_to_the_including_file) {
 // BAD INPUT
 // -----------------------------------------------------------------------------
 
-// Loads `text` and expects an error containing every part.
-static void expect_error(const temp_dir& dir, const std::string& text,
-    std::initializer_list<std::string> parts, const pbrt_params& params = {}) {
-  auto scene = scene_data{};
-  auto error = std::string{};
-  EXPECT_FALSE(load_text(dir, text, scene, error, nullptr, params)) << text;
-  for (auto& part : parts) EXPECT_TRUE(contains(error, part)) << error << "\nmissing: " << part;
-  EXPECT_TRUE(scene.shapes.empty() && scene.cameras.empty());
-  EXPECT_EQ(error.find('\n'), std::string::npos) << error;
-}
-
 TEST(pbrtio, bad_input_names_file_line_and_directive) {
   auto dir = temp_dir{};
   expect_error(dir, "WorldBegin\nShape \"sphere\n\"float radius\" 1\n",
@@ -979,13 +872,13 @@ TEST(pbrtio, include_errors) {
 // BOUNDS AND HOSTILE INPUT
 // -----------------------------------------------------------------------------
 
-// Lowers load_memory_limit for one test and restores it at the end, so
-// bounds are tested with small files.
-struct memory_limit_scope {
-  double saved = load_memory_limit;
-  explicit memory_limit_scope(double limit) { load_memory_limit = limit; }
-  ~memory_limit_scope() { load_memory_limit = saved; }
-};
+// Import options with a low memory limit, so that bounds are tested with
+// small files.
+static pbrt_params memory_limit_params(double limit) {
+  auto params       = pbrt_params{};
+  params.max_memory = limit;
+  return params;
+}
 
 const auto mebibyte = 1024.0 * 1024.0;
 
@@ -997,15 +890,16 @@ TEST(pbrtio, gzip_inflation_is_bounded) {
   expect_error(dir, "WorldBegin\nInclude \"bomb.pbrt.gz\"\nShape \"sphere\"\n",
       {"scene.pbrt:2:", "Include", "bomb.pbrt.gz", "more than 100 times its compressed size"});
   // Below 16 MiB, the budget bounds the inflated text.
-  auto limit = memory_limit_scope{2 * mebibyte};
+  auto limit = memory_limit_params(2 * mebibyte);
   write_gz(dir / "big.pbrt.gz", std::string(6 << 20, ' '));
   expect_error(dir, "WorldBegin\nInclude \"big.pbrt.gz\"\nShape \"sphere\"\n",
-      {"scene.pbrt:2:", "big.pbrt.gz", "inflating the text needs", "memory limit of 2 MiB"});
+      {"scene.pbrt:2:", "big.pbrt.gz", "inflating the text needs", "memory limit of 2 MiB"},
+      limit);
   // A gzip'd top-level file too.
   write_gz(dir / "top.pbrt.gz", "WorldBegin\nShape \"sphere\"\n" + std::string(6 << 20, ' '));
   auto scene = scene_data{};
   auto error = std::string{};
-  EXPECT_FALSE(load_pbrt_scene(dir / "top.pbrt.gz", scene, error));
+  EXPECT_FALSE(load_pbrt_scene(dir / "top.pbrt.gz", scene, error, limit));
   EXPECT_TRUE(contains(error, "top.pbrt.gz: inflating the text needs")) << error;
 }
 
@@ -1013,7 +907,7 @@ TEST(pbrtio, include_work_is_bounded) {
   // 11 files of 8 Includes each would be 8^10 parses: the text read with
   // every Include stops at 4 times the budget, an Include counting 1 MiB.
   auto dir   = temp_dir{};
-  auto limit = memory_limit_scope{1 * mebibyte};
+  auto limit = memory_limit_params(1 * mebibyte);
   for (auto level = 0; level < 11; level++) {
     auto text = std::string{};
     for (auto k = 0; k < 8; k++)
@@ -1023,12 +917,13 @@ TEST(pbrtio, include_work_is_bounded) {
   expect_error(dir, "WorldBegin\nShape \"sphere\"\nInclude \"level0.pbrt\"\n",
       {"level2.pbrt:1: Include", "level3.pbrt: the scene's text with its Includes comes to "
                                   "over 4 MiB, 4 times the memory limit",
-          "1 MiB"});
+          "1 MiB"},
+      limit);
 }
 
 TEST(pbrtio, generated_geometry_is_bounded) {
   auto dir   = temp_dir{};
-  auto limit = memory_limit_scope{4 * mebibyte};
+  auto limit = memory_limit_params(4 * mebibyte);
   // 64 spheres of about 116 KB each through repeated Includes: the one that
   // crosses 4 MiB is named with its file and line.
   write_text(dir / "spheres.pbrt", [] {
@@ -1040,7 +935,8 @@ TEST(pbrtio, generated_geometry_is_bounded) {
   for (auto k = 0; k < 8; k++) includes += "Include \"spheres.pbrt\"\n";
   expect_error(dir, includes,
       {"spheres.pbrt:", "Shape \"sphere\"", "the scene with this shape needs",
-          "memory limit of 4 MiB"});
+          "memory limit of 4 MiB"},
+      limit);
   // A parameter array claiming more than the budget fails as it grows.
   auto points = std::string{};
   for (auto k = 0; k < 1500000; k++) points += "0 ";
@@ -1048,15 +944,16 @@ TEST(pbrtio, generated_geometry_is_bounded) {
       "WorldBegin\nShape \"trianglemesh\" \"integer indices\" [0 1 2]\n\"point3 P\" [ " + points +
           "]\n",
       {"scene.pbrt:3:", "Shape \"trianglemesh\"", "the scene with parameter \"point3 P\"",
-          "memory limit of 4 MiB"});
+          "memory limit of 4 MiB"},
+      limit);
   // Curves add up across directives.
   {
-    auto small = memory_limit_scope{0.5 * mebibyte};
+    auto small = memory_limit_params(0.5 * mebibyte);
     expect_error(dir, "WorldBegin\n" + strands_text(70, 100, "point3"),
-        {"scene.pbrt:", "Shape \"curve\": the scene needs", "memory limit of 1 MiB"});
+        {"scene.pbrt:", "Shape \"curve\": the scene needs", "memory limit of 1 MiB"}, small);
   }
   // Curves as lines: the lines are checked before they are made.
-  auto params     = pbrt_params{};
+  auto params     = limit;
   params.curves_as_lines = true;
   params.segments = 100000;
   expect_error(dir, "WorldBegin\n" + strands_text(10, 10, "point3"),
@@ -1089,41 +986,17 @@ TEST(pbrtio, equal_area_resampling_is_bounded) {
   auto text  = std::string{
       "WorldBegin\nLightSource \"infinite\" \"string filename\" \"sky.pfm\"\n"};
   {
-    auto limit = memory_limit_scope{8 * mebibyte};
+    auto limit = memory_limit_params(8 * mebibyte);
     expect_error(dir, text,
         {"scene.pbrt:2:", "LightSource \"infinite\"",
             "the scene with the equal-area map \"sky.pfm\" resampled to equirectangular needs",
-            "memory limit of 8 MiB"});
+            "memory limit of 8 MiB"},
+        limit);
   }
-  auto limit = memory_limit_scope{16 * mebibyte};
+  auto limit = memory_limit_params(16 * mebibyte);
   auto scene = scene_data{};
-  ASSERT_TRUE(load_text(dir, text, scene, error)) << error;
+  ASSERT_TRUE(load_text(dir, text, scene, error, nullptr, limit)) << error;
   EXPECT_EQ(scene.textures.at(0).width, 1024);
-}
-
-TEST(pbrtio, strings_must_be_utf8) {
-  auto dir = temp_dir{};
-  // Latin-1, a lone continuation byte, an overlong '/', a surrogate, a code
-  // point past U+10FFFF and a sequence cut short by the closing quote.
-  for (auto bad : {"caf\xe9", "\x80", "\xc0\xaf", "\xed\xa0\x80", "\xf4\x90\x80\x80", "x\xe2\x82"}) {
-    expect_error(dir,
-        "WorldBegin\nMakeNamedMaterial \"" + std::string{bad} +
-            "\" \"string type\" \"diffuse\"\nShape \"sphere\"\n",
-        {"scene.pbrt:2: string \"", "\" is not valid UTF-8 (byte 0x"});
-  }
-  expect_error(dir, "WorldBegin\nShape \"sphere\" \"string note\" \"\xff\"\n",
-      {"scene.pbrt:2:", "not valid UTF-8 (byte 0xFF at offset 0"});
-  // Valid UTF-8 names of 2, 3 and 4 bytes are kept and save as json.
-  auto name  = std::string{"caf\xc3\xa9 \xe6\x97\xa5 \xf0\x9f\x98\x80"};
-  auto scene = scene_data{};
-  auto error = std::string{};
-  ASSERT_TRUE(load_text(dir,
-      "WorldBegin\nMakeNamedMaterial \"" + name + "\" \"string type\" \"diffuse\"\n"
-      "NamedMaterial \"" + name + "\"\nShape \"sphere\"\n",
-      scene, error))
-      << error;
-  EXPECT_EQ(scene.material_names.at(0), name);
-  EXPECT_TRUE(save_scene(dir / "saved.json", scene, error)) << error;
 }
 
 TEST(pbrtio, scene_with_nothing_to_render_is_an_error) {
@@ -1170,170 +1043,70 @@ TEST(pbrtio, only_regular_files_are_read) {
 }
 
 // -----------------------------------------------------------------------------
-// .HAIR FILES
+// THE CAMERA ALONE
 // -----------------------------------------------------------------------------
 
-// Writes a .hair file with the given header fields and arrays.
-static void write_hair(const std::string& filename, uint32_t strands, uint32_t points,
-    uint32_t flags, uint32_t default_segments, const std::vector<uint16_t>& segments,
-    const std::vector<float>& positions, const std::vector<float>& thickness = {},
-    const std::vector<float>& colors = {}) {
-  auto data = std::string("HAIR", 4);
-  auto put  = [&](const void* value, size_t size) { data.append((const char*)value, size); };
-  auto default_thickness = 0.1f, default_transparency = 0.0f;
-  float default_color[3] = {0.5f, 0.4f, 0.3f};
-  put(&strands, 4);
-  put(&points, 4);
-  put(&flags, 4);
-  put(&default_segments, 4);
-  put(&default_thickness, 4);
-  put(&default_transparency, 4);
-  put(default_color, 12);
-  data.resize(128, '\0');
-  put(segments.data(), segments.size() * 2);
-  put(positions.data(), positions.size() * 4);
-  put(thickness.data(), thickness.size() * 4);
-  put(colors.data(), colors.size() * 4);
-  write_text(filename, data);
-}
-
-TEST(pbrtio, hair_model_catmull_rom_through_points) {
-  auto dir = temp_dir{};
-  // Two strands: 3 segments and 1 segment, with thickness and colour arrays.
-  auto positions = std::vector<float>{0, 0, 0, 1, 0, 0, 2, 1, 0, 3, 1, 0, 0, 5, 0, 0, 6, 0};
-  auto thickness = std::vector<float>{.4f, .3f, .2f, .1f, .2f, .2f};
-  auto colors    = std::vector<float>(18, 0.25f);
-  write_hair(dir / "model.hair", 2, 6, 1 | 2 | 4 | 16, 0, {3, 1}, positions, thickness, colors);
-  auto shape = shape_data{};
+TEST(pbrtio, camera_alone_is_read_up_to_world_begin) {
+  auto dir    = temp_dir{};
+  auto before = std::string{
+      "LookAt 0 1 5  0 0 0  0 1 0\nCamera \"perspective\" \"float fov\" [ 30 ]\n"
+      "Film \"image\" \"integer xresolution\" [ 400 ] \"integer yresolution\" [ 200 ]\n"};
+  write_text(dir / "full.pbrt", before + "WorldBegin\nShape \"sphere\"\n");
+  // The world of a scene whose Includes are missing is never read.
+  write_text(dir / "cut.pbrt", before + "WorldBegin\nInclude \"missing.pbrt\"\nShape [\n");
+  auto scene = scene_data{};
   auto error = std::string{};
-  auto color = vec3f{0, 0, 0};
-  ASSERT_TRUE(load_hair_model(dir / "model.hair", shape, error, &color)) << error;
-  ASSERT_EQ(shape.curves.size(), 4u);
-  expect_near(color, {.25f, .25f, .25f});
-  // The curve passes through the points, with radius = thickness / 2.
-  expect_near(shape.positions[shape.curves[1].x], {1, 0, 0});
-  expect_near(shape.positions[shape.curves[1].w], {2, 1, 0});
-  EXPECT_FLOAT_EQ(shape.radius[shape.curves[1].x], 0.15f);
-  EXPECT_EQ(shape.curves[1].x, shape.curves[0].w);
-  // Catmull-Rom: the tangent at point 1 is (p2 - p0) / 2, so the first
-  // inner control point of curve 1 is p1 + (p2 - p0) / 6.
-  expect_near(shape.positions[shape.curves[1].y], vec3f{1, 0, 0} + vec3f{2, 1, 0} / 6.0f);
-  // C1 continuity at the joint.
-  auto d_out = shape.positions[shape.curves[1].y] - shape.positions[shape.curves[1].x];
-  auto d_in  = shape.positions[shape.curves[0].w] - shape.positions[shape.curves[0].z];
-  expect_near(d_out, d_in);
-  expect_near(shape.positions[shape.curves[3].w], {0, 6, 0});
+  ASSERT_TRUE(load_pbrt_scene(dir / "full.pbrt", scene, error)) << error;
+  EXPECT_FALSE(load_pbrt_scene(dir / "cut.pbrt", scene, error));
+  ASSERT_TRUE(load_pbrt_scene(dir / "full.pbrt", scene, error)) << error;
+  auto camera = camera_data{};
+  ASSERT_TRUE(load_pbrt_camera(dir / "cut.pbrt", camera, error)) << error;
+  EXPECT_EQ(camera.frame, scene.cameras.at(0).frame);
+  EXPECT_EQ(camera.lens, scene.cameras[0].lens);
+  EXPECT_EQ(camera.film, scene.cameras[0].film);
+  EXPECT_EQ(camera.aspect, scene.cameras[0].aspect);
+  EXPECT_EQ(camera.aspect, 2.0f);
+  // No WorldBegin, or an error before it: messages name the file.
+  write_text(dir / "noworld.pbrt", before);
+  EXPECT_FALSE(load_pbrt_camera(dir / "noworld.pbrt", camera, error));
+  EXPECT_EQ(error, dir / "noworld.pbrt" + ": no WorldBegin");
+  write_text(dir / "bad.pbrt", "Camera \"perspective\" \"float fov\" [ x ]\nWorldBegin\n");
+  EXPECT_FALSE(load_pbrt_camera(dir / "bad.pbrt", camera, error));
+  EXPECT_TRUE(contains(error, dir / "bad.pbrt:1: Camera")) << error;
 }
 
-TEST(pbrtio, hair_model_round_trip_and_scene) {
-  auto dir = temp_dir{};
-  // Default segments (no segments array), default thickness, no colour.
-  auto positions = std::vector<float>{};
-  for (auto s = 0; s < 3; s++)
-    for (auto k = 0; k < 5; k++) positions.insert(positions.end(), {(float)s, (float)k, 0.1f * k});
-  write_hair(dir / "a.hair", 3, 15, 2, 4, {}, positions);
-  auto shape = shape_data{};
-  auto error = std::string{};
-  auto color = vec3f{};
-  ASSERT_TRUE(load_hair_model(dir / "a.hair", shape, error, &color)) << error;
-  EXPECT_EQ(shape.curves.size(), 12u);
-  EXPECT_FLOAT_EQ(shape.radius[0], 0.05f);
-  expect_near(color, {.5f, .4f, .3f});  // header default
-  ASSERT_TRUE(save_hair_model(dir / "b.hair", shape, error)) << error;
-  auto again = shape_data{};
-  ASSERT_TRUE(load_hair_model(dir / "b.hair", again, error)) << error;
-  EXPECT_EQ(again.positions, shape.positions);
-  EXPECT_EQ(again.radius, shape.radius);
-  EXPECT_EQ(again.curves, shape.curves);
-  // Lines save too: the strand's vertices become its points.
-  auto lines = curves_to_lines(shape, 2);
-  ASSERT_TRUE(save_hair_model(dir / "c.hair", lines, error)) << error;
-  ASSERT_TRUE(load_hair_model(dir / "c.hair", again, error)) << error;
-  EXPECT_EQ(again.curves.size(), 24u);
-  // The scene: shape, hair material, instance, camera, environment.
-  auto scene  = scene_data{};
-  auto params = pbrt_params{};
-  ASSERT_TRUE(load_hair_scene(dir / "a.hair", scene, error, params)) << error;
-  EXPECT_EQ(scene.shapes.size(), 1u);
-  EXPECT_EQ(scene.materials[0].type, material_type::hair);
-  EXPECT_FALSE(scene.materials[0].hair.has_color);
-  EXPECT_EQ(scene.cameras.size(), 1u);
-  EXPECT_EQ(scene.environments.size(), 1u);
-  EXPECT_TRUE(validate_scene(scene, error)) << error;
-  params.curves_as_lines = true;
-  ASSERT_TRUE(load_hair_scene(dir / "a.hair", scene, error, params)) << error;
-  EXPECT_EQ(scene.shapes[0].lines.size(), 48u);
-}
+// -----------------------------------------------------------------------------
+// PBRT CURVES
+// -----------------------------------------------------------------------------
 
-TEST(pbrtio, bad_hair_files) {
+TEST(pbrtio, saved_curves_load_back) {
   auto dir   = temp_dir{};
   auto shape = shape_data{};
-  auto error = std::string{};
-  auto positions = std::vector<float>{0, 0, 0, 1, 0, 0, 2, 0, 0};
-  // Truncated header.
-  write_text(dir / "short.hair", std::string("HAIR\1\0\0\0", 8));
-  EXPECT_FALSE(load_hair_model(dir / "short.hair", shape, error));
-  EXPECT_TRUE(contains(error, "short.hair") && contains(error, "byte 8")) << error;
-  // Bad signature.
-  write_hair(dir / "sig.hair", 1, 3, 2, 2, {}, positions);
-  {
-    auto stream = std::fstream(dir / "sig.hair", std::ios::in | std::ios::out | std::ios::binary);
-    stream.write("HAIX", 4);
+  for (auto s = 0; s < 3; s++) {
+    auto points = std::vector<vec3f>{};
+    for (auto k = 0; k < 4; k++) points.push_back({0.1f * s, 0.5f * k, 0.01f * k * k});
+    auto radii = std::vector<float>{0.02f, 0.015f, 0.01f, 0.005f};
+    append_catmull_rom_strand(shape, points, radii);
   }
-  EXPECT_FALSE(load_hair_model(dir / "sig.hair", shape, error));
-  EXPECT_TRUE(contains(error, "signature")) << error;
-  // Absurd counts: four billion points in a 164-byte file, no allocation.
-  write_hair(dir / "absurd.hair", 1, 4000000000u, 2, 2, {}, positions);
-  EXPECT_FALSE(load_hair_model(dir / "absurd.hair", shape, error));
-  EXPECT_TRUE(contains(error, "truncated at byte 164") && contains(error, "4000000000")) << error;
-  // Truncated arrays.
-  write_hair(dir / "cut.hair", 1, 3, 2 | 4, 2, {}, positions, {1, 1});
-  EXPECT_FALSE(load_hair_model(dir / "cut.hair", shape, error));
-  EXPECT_TRUE(contains(error, "cut.hair: truncated at byte 172")) << error;
-  // Segments that do not add up to the point count.
-  write_hair(dir / "sum.hair", 1, 3, 1 | 2, 0, {5}, positions);
-  EXPECT_FALSE(load_hair_model(dir / "sum.hair", shape, error));
-  EXPECT_TRUE(contains(error, "add up to 6 points")) << error;
-  // Not finite.
-  write_hair(dir / "nan.hair", 1, 3, 2, 2, {}, {0, 0, 0, NAN, 0, 0, 2, 0, 0});
-  EXPECT_FALSE(load_hair_model(dir / "nan.hair", shape, error));
-  EXPECT_TRUE(contains(error, "point 1 at byte 140")) << error;
-  // No points array.
-  write_hair(dir / "nopoints.hair", 1, 3, 0, 2, {}, {});
-  EXPECT_FALSE(load_hair_model(dir / "nopoints.hair", shape, error));
-  // Saving an empty shape fails and leaves no file.
-  EXPECT_FALSE(save_hair_model(dir / "empty.hair", shape_data{}, error));
-  EXPECT_FALSE(fs::exists(dir / "empty.hair"));
-  EXPECT_EQ(std::distance(fs::directory_iterator(dir.path), fs::directory_iterator{}), 7);
-}
-
-TEST(pbrtio, hair_header_counts_devices_and_memory_are_checked_first) {
-  auto dir   = temp_dir{};
-  auto shape = shape_data{};
   auto error = std::string{};
-  auto positions = std::vector<float>{0, 0, 0, 1, 0, 0, 2, 0, 0};
-  // Four billion strands of no points and no segments array: refused by the
-  // header's counts before any loop over the strands.
-  write_hair(dir / "strands.hair", 4000000000u, 0, 2, 0, {}, {});
-  EXPECT_FALSE(load_hair_model(dir / "strands.hair", shape, error));
-  EXPECT_TRUE(contains(error, "strands.hair") && contains(error, "4000000000 strands") &&
-              contains(error, "0 points"))
-      << error;
-  // A device or a fifo named as a model is refused, not read forever.
-  fs::create_symlink("/dev/zero", dir / "zero.hair");
-  EXPECT_FALSE(load_hair_model(dir / "zero.hair", shape, error));
-  EXPECT_TRUE(contains(error, "zero.hair") && contains(error, "not a regular file")) << error;
-  ASSERT_EQ(mkfifo((dir / "fifo.hair").c_str(), 0600), 0);
-  EXPECT_FALSE(load_hair_model(dir / "fifo.hair", shape, error));
-  EXPECT_TRUE(contains(error, "fifo.hair") && contains(error, "not a regular file")) << error;
-  // The points against the memory limit.
-  write_hair(dir / "model.hair", 1, 3, 2, 2, {}, positions);
-  auto limit        = load_memory_limit;
-  load_memory_limit = 100;
-  auto loaded       = load_hair_model(dir / "model.hair", shape, error);
-  load_memory_limit = limit;
-  EXPECT_FALSE(loaded);
-  EXPECT_TRUE(contains(error, "model.hair: ") && contains(error, "over the memory limit"))
-      << error;
-  EXPECT_TRUE(load_hair_model(dir / "model.hair", shape, error)) << error;
+  for (auto name : {"curves.pbrt", "curves.pbrt.gz"}) {
+    ASSERT_TRUE(save_pbrt_curves(dir / name, shape, error)) << error;
+    auto scene = scene_data{};
+    ASSERT_TRUE(load_text(dir, "WorldBegin\nInclude \"" + std::string{name} + "\"\n", scene,
+        error))
+        << error;
+    ASSERT_EQ(scene.shapes.size(), 1u);
+    auto& loaded = scene.shapes[0];
+    ASSERT_EQ(loaded.curves.size(), shape.curves.size());
+    // Widths are diameters; strands keep their shared end points.
+    for (size_t i = 0; i < shape.curves.size(); i++) {
+      auto& a = shape.curves[i];
+      auto& b = loaded.curves[i];
+      for (auto k = 0; k < 4; k++)
+        expect_near(loaded.positions[b[k]], shape.positions[a[k]], 1e-6f);
+      EXPECT_NEAR(loaded.radius[b.x], shape.radius[a.x], 1e-7f);
+      EXPECT_NEAR(loaded.radius[b.w], shape.radius[a.w], 1e-7f);
+    }
+    EXPECT_EQ(loaded.curves[1].x, loaded.curves[0].w);
+  }
 }

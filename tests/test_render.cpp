@@ -7,6 +7,7 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 #include <yocto/yocto_hairgen.h>
+#include <yocto/yocto_pbrtio.h>
 #include <yocto/yocto_trace.h>
 
 #include <cmath>

@@ -9,8 +9,9 @@
 #include <charconv>
 
 #include <nlohmann/json.hpp>
+#include <yocto/yocto_sceneio.h>
 
-#include "test_sceneio.h"
+#include "test_io.h"
 
 using namespace yocto;
 using namespace yocto_test;
@@ -772,10 +773,7 @@ TEST(json, each_file_loads_once_and_the_sum_fits_the_memory_limit) {
   write_file(dir.file("three.json"), R"({"shapes": [{"name": "a", "uri": "shapes/a.ply"},
       {"name": "b", "uri": "shapes/b.ply"}, {"name": "c", "uri": "shapes/c.ply"}]})");
   auto bytes = sphere.positions.size() * (12 + 12 + 8) + sphere.triangles.size() * 12;
-  auto limit = load_memory_limit;
-  load_memory_limit = 2.5 * bytes;
-  auto loaded       = load_scene(dir.file("three.json"), scene, error);
-  load_memory_limit = limit;
+  auto loaded = load_scene(dir.file("three.json"), scene, error, nullptr, 2.5 * bytes);
   EXPECT_FALSE(loaded);
   EXPECT_TRUE(contains(error, dir.file("three.json") + ": loading the shapes up to shape \"c\"") &&
               contains(error, "over the memory limit"))

@@ -4,16 +4,9 @@
 
 #include "yocto_hairgen.h"
 
-#include <sys/stat.h>
-#include <unistd.h>
-#include <zlib.h>
-
 #include <cmath>
-#include <cstdio>
-#include <memory>
 
 #include "yocto_sampling.h"
-#include "yocto_sceneio.h"
 
 // -----------------------------------------------------------------------------
 // STRANDS
@@ -301,58 +294,6 @@ scene_data make_hair_scene(const hair_style_params& params, const hair_material&
         add_material("head", solid));
   }
   return scene;
-}
-
-}  // namespace yocto
-
-// -----------------------------------------------------------------------------
-// PBRT CURVES
-// -----------------------------------------------------------------------------
-namespace yocto {
-
-bool save_pbrt_curves(const std::string& filename, const shape_data& shape,
-    std::string& error) {
-  auto gzipped = filename.size() > 3 && filename.substr(filename.size() - 3) == ".gz";
-  // Through sceneio's checked temporary; zlib writes into a duplicate of its
-  // descriptor, so that finishing can still flush and measure the file.
-  auto output = output_file{};
-  if (!open_output_file(output, filename, error)) return false;
-  auto descriptor = dup(output.descriptor);
-  auto file = descriptor >= 0 ? gzdopen(descriptor, gzipped ? "wb6" : "wbT") : nullptr;
-  if (!file) {
-    if (descriptor >= 0) close(descriptor);
-    discard_output_file(output);
-    return error = filename + ": cannot open for writing", false;
-  }
-  auto ok   = true;
-  auto line = std::string{};
-  char buffer[512];
-  auto write = [&](const char* text, int size) {
-    if (ok && gzwrite(file, text, size) != size) ok = false;
-  };
-  auto header = std::string("# hair curves written by yocto-hair's generator\n");
-  write(header.data(), (int)header.size());
-  for (auto& curve : shape.curves) {
-    auto& p = shape.positions;
-    auto  r = [&](int i) { return shape.radius.empty() ? 0.0f : shape.radius[i]; };
-    auto size = std::snprintf(buffer, sizeof(buffer),
-        "Shape \"curve\" \"string type\" \"cylinder\" \"point3 P\" [ %.7g %.7g %.7g %.7g %.7g "
-        "%.7g %.7g %.7g %.7g %.7g %.7g %.7g ] \"float width0\" %.7g \"float width1\" %.7g\n",
-        p[curve.x].x, p[curve.x].y, p[curve.x].z, p[curve.y].x, p[curve.y].y, p[curve.y].z,
-        p[curve.z].x, p[curve.z].y, p[curve.z].z, p[curve.w].x, p[curve.w].y, p[curve.w].z,
-        2 * r(curve.x), 2 * r(curve.w));
-    write(buffer, size);
-  }
-  if (gzclose(file) != Z_OK) ok = false;
-  // The bytes went through zlib's descriptor: the size check counts them.
-  auto status = (struct stat){};
-  if (ok && fstat(output.descriptor, &status) == 0) output.written = (size_t)status.st_size;
-  if (!ok) {
-    discard_output_file(output);
-    return error = filename + ": cannot write file", false;
-  }
-  if (!commit_output_file(output, error)) return false;
-  return true;
 }
 
 }  // namespace yocto

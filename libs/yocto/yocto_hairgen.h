@@ -62,11 +62,6 @@ texture_data make_sky_texture(int width, int height, const vec3f& sun_direction)
 // the curls' four locks, which take their own melanin instead of its pigment.
 scene_data make_hair_scene(const hair_style_params& params, const hair_material& hair);
 
-// Writes curves in pbrt's syntax (`Shape "curve"`, one per Bezier segment,
-// `point3 P` and widths as diameters) to .pbrt or gzip'd .pbrt.gz.
-bool save_pbrt_curves(const std::string& filename, const shape_data& shape,
-    std::string& error);
-
 }  // namespace yocto
 
 // -----------------------------------------------------------------------------

@@ -30,7 +30,8 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
-#include "yocto_sceneio.h"
+#include "yocto_image.h"
+#include "yocto_ply.h"
 
 // -----------------------------------------------------------------------------
 // FILE READING
@@ -40,16 +41,6 @@ namespace yocto {
 static bool ends_with(std::string_view text, std::string_view suffix) {
   return text.size() >= suffix.size() &&
          text.substr(text.size() - suffix.size()) == suffix;
-}
-
-// A converted scene is validated like a json one (what the directives cannot
-// see alone, e.g. a Scale 0 0 0 instance); on error it is left empty.
-static bool validate_loaded_scene(
-    scene_data& scene, const std::string& filename, std::string& error) {
-  if (validate_scene(scene, error)) return true;
-  error = filename + ": " + error;
-  scene = {};
-  return false;
 }
 
 // Opens a file for reading and gives its size; only regular files are
@@ -84,7 +75,7 @@ const auto min_inflation_bound = 16.0 * (1 << 20);
 // silently short file. `held` bytes are already in use by the load: what is
 // read is checked against the memory budget with them, before allocating.
 static bool read_open_file(int fd, size_t size, const std::string& filename,
-    std::string& data, std::string& error, double held) {
+    std::string& data, std::string& error, double held, double max_memory) {
   data.clear();
   if (ends_with(filename, ".gz")) {
     auto file = gzdopen(fd, "rb");
@@ -114,7 +105,7 @@ static bool read_open_file(int fd, size_t size, const std::string& filename,
         auto capacity = std::max(2 * data.capacity(), old_size + chunk);
         auto message  = std::string{};
         if (!check_load_memory(filename, "inflating the text",
-                held + (double)data.capacity() + (double)capacity, message)) {
+                held + (double)data.capacity() + (double)capacity, max_memory, message)) {
           gzclose_r(file);
           error = message;
           data  = {};
@@ -141,7 +132,7 @@ static bool read_open_file(int fd, size_t size, const std::string& filename,
     }
     return true;
   }
-  if (!check_load_memory(filename, "the text", held + (double)size, error)) {
+  if (!check_load_memory(filename, "the text", held + (double)size, max_memory, error)) {
     close(fd);
     return false;
   }
@@ -160,15 +151,6 @@ static bool read_open_file(int fd, size_t size, const std::string& filename,
     return false;
   }
   return true;
-}
-
-// Reads a whole regular file into memory; .gz files are inflated.
-static bool read_whole_file(
-    const std::string& filename, std::string& data, std::string& error, double held = 0) {
-  auto size = (size_t)0;
-  auto fd   = open_regular_file(filename, size, error);
-  if (fd < 0) return false;
-  return read_open_file(fd, size, filename, data, error, held);
 }
 
 // A read-only memory mapping of a plain file, unmapped when it goes out of
@@ -603,6 +585,10 @@ struct pbrt_state {
   vec2i             film       = {0, 0};
   bool              has_film   = false;
 
+  // A camera-only load stops at the first WorldBegin.
+  bool camera_only = false;
+  bool world_begun = false;
+
   std::unordered_set<std::string> warned = {};
 
   // Memory and work of the load, for the budget (see memory_in_use).
@@ -630,7 +616,7 @@ static void set_error(pbrt_state& state, const std::string& message, int line = 
 
 // Memory the load holds: the scene so far, the text of the open files, the
 // parameter lists, and the parser's own state (blocks, materials, names;
-// bytes per table entry estimated). Checked against load_memory_limit after
+// bytes per table entry estimated). Checked against params.max_memory after
 // each directive and before each large allocation, so repeated Includes of
 // small files cannot build an unbounded scene.
 static double memory_in_use(const pbrt_state& state) {
@@ -647,10 +633,10 @@ static double memory_in_use(const pbrt_state& state) {
 // Fails the directive with "FILE:LINE: DIRECTIVE: WHAT needs N MiB, over the
 // memory limit..." if `bytes` exceed the budget.
 static bool check_memory(pbrt_state& state, const std::string& what, double bytes, int line = -1) {
-  if (bytes <= load_memory_limit) return true;
+  if (bytes <= state.params.max_memory) return true;
   auto error = std::string{};
   check_load_memory(state.lexer->filename + ":" + std::to_string(line < 0 ? state.line : line),
-      directive_name(state) + ": " + what, bytes, error);
+      directive_name(state) + ": " + what, bytes, state.params.max_memory, error);
   if (state.error.empty()) state.error = error;
   return false;
 }
@@ -1369,7 +1355,7 @@ static bool parse_light_source(pbrt_state& state) {
         auto image = texture_data{};
         auto error = std::string{};
         if (!check_regular_file(state, path, map)) return false;
-        if (!load_image(path, image, error)) {
+        if (!load_image(path, image, error, state.params.max_memory)) {
           set_error(state, "cannot load environment map: " + error);
           return false;
         }
@@ -1725,7 +1711,7 @@ static bool parse_shape(pbrt_state& state) {
     auto shape = shape_data{};
     auto error = std::string{};
     if (!check_regular_file(state, path, filename)) return false;
-    if (!load_shape(path, shape, error)) {
+    if (!load_shape(path, shape, error, state.params.max_memory)) {
       set_error(state, error);
       return false;
     }
@@ -1971,6 +1957,7 @@ static bool parse_directive(pbrt_state& state, std::string_view directive) {
   } else if (directive == "WorldBegin") {
     state.graphics.ctm               = identity3x4f;
     state.coordinate_systems["world"] = identity3x4f;
+    state.world_begun                 = true;
   } else if (directive == "ReverseOrientation") {
     state.graphics.reverse_orientation = !state.graphics.reverse_orientation;
   } else if (directive == "WorldEnd") {
@@ -2043,13 +2030,14 @@ static bool parse_pbrt_file(pbrt_state& state, const std::string& filename, int 
     lexer.ptr = (const char*)mapping.data;
     lexer.end = lexer.ptr + mapping.size;
   } else {
-    if (!read_open_file(fd, size, filename, lexer.data, error, memory_in_use(state)))
+    if (!read_open_file(fd, size, filename, lexer.data, error, memory_in_use(state),
+            state.params.max_memory))
       return fail(error);
     lexer.ptr = lexer.data.data();
     lexer.end = lexer.data.data() + lexer.data.size();
   }
   state.parsed_bytes += std::max((double)(lexer.end - lexer.ptr), min_include_bytes);
-  auto max_parsed = max_text_per_budget * load_memory_limit;
+  auto max_parsed = max_text_per_budget * state.params.max_memory;
   if (state.parsed_bytes > max_parsed)
     return fail(filename + ": the scene's text with its Includes comes to over " +
                 std::to_string((long long)(max_parsed / (1 << 20))) + " MiB, " +
@@ -2079,27 +2067,37 @@ static bool parse_pbrt_file(pbrt_state& state, const std::string& filename, int 
       if (state.error.empty()) set_error(state, "cannot parse directive");
       return false;
     }
+    // The world (and what it Includes) is never read for a camera.
+    if (state.camera_only && state.world_begun) break;
     // What the directive added, within the budget.
     auto memory = memory_in_use(state);
-    if (memory > load_memory_limit && !check_memory(state, "the scene", memory)) return false;
+    if (memory > state.params.max_memory && !check_memory(state, "the scene", memory))
+      return false;
   }
   state.open_files.pop_back();
   state.text_bytes -= text_bytes;
   return true;
 }
 
-bool load_pbrt_scene(const std::string& filename, scene_data& scene, std::string& error,
-    const pbrt_params& params, std::vector<std::string>* warnings) {
+static bool load_pbrt_scene(const std::string& filename, scene_data& scene,
+    std::string& error, const pbrt_params& params, std::vector<std::string>* warnings,
+    bool camera_only) {
   scene       = {};
   auto state  = pbrt_state{};
   state.scene = &scene;
-  state.params   = params;
-  state.warnings = warnings;
+  state.params      = params;
+  state.warnings    = warnings;
+  state.camera_only = camera_only;
   // pbrt's default material is a grey diffuse.
   state.materials.push_back(material_data{material_type::matte, {0, 0, 0}, {0.5f, 0.5f, 0.5f}});
   state.material_names.push_back("default");
   if (!parse_pbrt_file(state, filename, 0)) {
     error = state.error;
+    scene = {};
+    return false;
+  }
+  if (camera_only && !state.world_begun) {
+    error = filename + ": no WorldBegin";
     scene = {};
     return false;
   }
@@ -2129,7 +2127,7 @@ bool load_pbrt_scene(const std::string& filename, scene_data& scene, std::string
                    curves * (segments + 1) * (sizeof(vec3f) + sizeof(float));
       if (!check_load_memory(filename,
               "the scene with curves as lines (" + std::to_string(segments) + " segments each)",
-              memory_in_use(state) + lines, error)) {
+              memory_in_use(state) + lines, params.max_memory, error)) {
         scene = {};
         return false;
       }
@@ -2141,324 +2139,71 @@ bool load_pbrt_scene(const std::string& filename, scene_data& scene, std::string
   return validate_loaded_scene(scene, filename, error);
 }
 
-}  // namespace yocto
-
-// -----------------------------------------------------------------------------
-// CURVES TO LINES
-// -----------------------------------------------------------------------------
-namespace yocto {
-
-shape_data curves_to_lines(const shape_data& curves, int segments) {
-  segments        = std::max(segments, 1);
-  auto lines      = shape_data{};
-  auto has_radius = curves.radius.size() == curves.positions.size();
-  auto has_colors = curves.colors.size() == curves.positions.size();
-  auto num_vertices = (int)curves.positions.size();
-  // Line vertex of each curve end point, so strands share their joints.
-  auto end_vertex = std::vector<int>(curves.positions.size(), -1);
-  auto emit       = [&](const vec4i& c, float u) {
-    auto& p = curves.positions;
-    lines.positions.push_back(eval_bezier(p[c.x], p[c.y], p[c.z], p[c.w], u));
-    if (has_radius) {
-      auto& r = curves.radius;
-      lines.radius.push_back(eval_bezier(r[c.x], r[c.y], r[c.z], r[c.w], u));
-    }
-    if (has_colors) {
-      auto& k = curves.colors;
-      lines.colors.push_back(eval_bezier(k[c.x], k[c.y], k[c.z], k[c.w], u));
-    }
-    return (int)lines.positions.size() - 1;
-  };
-  lines.positions.reserve(curves.curves.size() * segments + 1);
-  lines.lines.reserve(curves.curves.size() * segments);
-  for (auto& c : curves.curves) {
-    if (glm::any(glm::lessThan(c, vec4i{0})) ||
-        glm::any(glm::greaterThanEqual(c, vec4i{num_vertices})))
-      continue;
-    if (end_vertex[c.x] < 0) end_vertex[c.x] = emit(c, 0);
-    auto previous = end_vertex[c.x];
-    for (auto s = 1; s <= segments; s++) {
-      auto next = -1;
-      if (s < segments) {
-        next = emit(c, (float)s / segments);
-      } else {
-        if (end_vertex[c.w] < 0) end_vertex[c.w] = emit(c, 1);
-        next = end_vertex[c.w];
-      }
-      lines.lines.push_back({previous, next});
-      previous = next;
-    }
-  }
-  return lines;
+bool load_pbrt_scene(const std::string& filename, scene_data& scene, std::string& error,
+    const pbrt_params& params, std::vector<std::string>* warnings) {
+  return load_pbrt_scene(filename, scene, error, params, warnings, false);
 }
 
-}  // namespace yocto
-
-// -----------------------------------------------------------------------------
-// HAIR FILES
-// -----------------------------------------------------------------------------
-namespace yocto {
-
-// Cem Yuksel's .hair layout: a 128-byte header, then the optional arrays
-// segments (uint16 per strand), points (3 floats), thickness, transparency
-// (1 float) and colour (3 floats) per point, in that order, little-endian.
-struct hair_header {
-  char     signature[4]         = {'H', 'A', 'I', 'R'};
-  uint32_t num_strands          = 0;
-  uint32_t num_points           = 0;
-  uint32_t flags                = 0;
-  uint32_t default_segments     = 0;
-  float    default_thickness    = 1;
-  float    default_transparency = 0;
-  float    default_color[3]     = {0, 0, 0};
-  char     info[88]             = {};
-};
-static_assert(sizeof(hair_header) == 128, "the .hair header is 128 bytes");
-
-enum hair_flags : uint32_t {
-  hair_has_segments     = 1,
-  hair_has_points       = 2,
-  hair_has_thickness    = 4,
-  hair_has_transparency = 8,
-  hair_has_color        = 16,
-};
-
-static bool load_hair_model(const std::string& filename, shape_data& shape,
-    std::string& error, vec3f* color, bool* has_color_array) {
-  shape          = {};
-  auto file_size = (size_t)0;
-  if (!check_input_file(filename, file_size, error)) return false;
-  auto data = std::string{};
-  if (!read_whole_file(filename, data, error)) return false;
-  auto header = hair_header{};
-  if (data.size() < sizeof(header)) {
-    error = filename + ": truncated header at byte " + std::to_string(data.size()) +
-            " (a .hair header has 128 bytes)";
-    return false;
-  }
-  std::memcpy(&header, data.data(), sizeof(header));
-  if (std::memcmp(header.signature, "HAIR", 4) != 0) {
-    error = filename + ": not a .hair file (bad signature at byte 0)";
-    return false;
-  }
-  auto flags = header.flags;
-  if (!(flags & hair_has_points)) {
-    error = filename + ": the header (byte 12) declares no points array";
-    return false;
-  }
-  // Check every count against the file size before allocating anything.
-  auto strands = (uint64_t)header.num_strands, points = (uint64_t)header.num_points;
-  auto offset_segments  = (uint64_t)sizeof(header);
-  auto offset_points    = offset_segments + ((flags & hair_has_segments) ? 2 * strands : 0);
-  auto offset_thickness = offset_points + 12 * points;
-  auto offset_transp    = offset_thickness + ((flags & hair_has_thickness) ? 4 * points : 0);
-  auto offset_color     = offset_transp + ((flags & hair_has_transparency) ? 4 * points : 0);
-  auto expected_size    = offset_color + ((flags & hair_has_color) ? 12 * points : 0);
-  if (expected_size > data.size()) {
-    error = filename + ": truncated at byte " + std::to_string(data.size()) + ": the header (" +
-            std::to_string(strands) + " strands, " + std::to_string(points) +
-            " points) needs " + std::to_string(expected_size) + " bytes";
-    return false;
-  }
-  if (points > (uint64_t)std::numeric_limits<int>::max() / 4) {
-    error = filename + ": too many points (" + std::to_string(points) + ") at byte 8";
-    return false;
-  }
-  // Every strand has a point, so the points (bounded by the file's size
-  // above) bound the strands before any loop over them.
-  if (strands > points) {
-    error = filename + ": the header claims " + std::to_string(strands) +
-            " strands (byte 4) for " + std::to_string(points) +
-            " points (byte 8); every strand has at least one point";
-    return false;
-  }
-  // The points read, then the spline through them: up to three control
-  // points with a radius (and a colour) and a curve per point.
-  auto needed = (double)points * (sizeof(vec3f) + sizeof(float)) +
-                3.0 * (double)points * (sizeof(vec3f) + sizeof(float)) +
-                (double)points * sizeof(vec4i) +
-                ((flags & hair_has_color) ? 4.0 * (double)points * sizeof(vec3f) : 0.0);
-  if (!check_load_memory(
-          filename, "the spline through " + std::to_string(points) + " points", needed, error))
-    return false;
-  auto bytes = (const unsigned char*)data.data();
-  auto read_float = [&](uint64_t offset) {
-    auto value = 0.0f;
-    std::memcpy(&value, bytes + offset, 4);
-    return value;
-  };
-  auto strand_segments = [&](uint64_t strand) -> uint64_t {
-    if (!(flags & hair_has_segments)) return header.default_segments;
-    auto value = (uint16_t)0;
-    std::memcpy(&value, bytes + offset_segments + 2 * strand, 2);
-    return value;
-  };
-  auto total = (uint64_t)0;
-  for (auto s = (uint64_t)0; s < strands; s++) total += strand_segments(s) + 1;
-  if (total != points) {
-    error = filename + ": the strands' segments " +
-            std::string{(flags & hair_has_segments) ? "(array at byte 128)"
-                                                    : "(default at byte 16)"} +
-            " add up to " + std::to_string(total) + " points, the header (byte 8) says " +
-            std::to_string(points);
-    return false;
-  }
-  // Points and radii, checked for garbage.
-  auto positions = std::vector<vec3f>(points);
-  auto radii     = std::vector<float>(points, header.default_thickness / 2);
-  for (auto i = (uint64_t)0; i < points; i++) {
-    auto offset  = offset_points + 12 * i;
-    positions[i] = {read_float(offset), read_float(offset + 4), read_float(offset + 8)};
-    if (!isfinite(positions[i])) {
-      error = filename + ": point " + std::to_string(i) + " at byte " + std::to_string(offset) +
-              " is not finite";
-      return false;
-    }
-    if (flags & hair_has_thickness) radii[i] = read_float(offset_thickness + 4 * i) / 2;
-    if (!(radii[i] >= 0 && radii[i] < flt_max)) {
-      error = filename + ": thickness of point " + std::to_string(i) + " at byte " +
-              std::to_string((flags & hair_has_thickness) ? offset_thickness + 4 * i : 20) +
-              " is not a non-negative number";
-      return false;
-    }
-  }
-  // Per-point colours, when the file has them: the shape's colours (clamped
-  // into (0, 1), where Chiang's inversion to an absorption holds; a
-  // non-finite one as the file's average), and their average the model's.
-  auto colors  = std::vector<vec3f>{};
-  auto average = vec3f{header.default_color[0], header.default_color[1], header.default_color[2]};
-  if (flags & hair_has_color) {
-    auto sum = vec3f{0, 0, 0};
-    colors.resize(points);
-    for (auto i = (uint64_t)0; i < points; i++) {
-      auto offset = offset_color + 12 * i;
-      colors[i]   = vec3f{read_float(offset), read_float(offset + 4), read_float(offset + 8)};
-      if (isfinite(colors[i])) sum += colors[i];
-    }
-    average = points ? sum / (float)points : vec3f{0, 0, 0};
-    for (auto& c : colors) c = glm::clamp(isfinite(c) ? c : average, vec3f{0.01f}, vec3f{0.99f});
-  }
-  if (color) *color = average;
-  if (has_color_array) *has_color_array = (flags & hair_has_color) != 0;
-  // A Catmull-Rom spline through each strand's points.
-  shape.positions.reserve(points * 3);
-  shape.radius.reserve(points * 3);
-  auto first = (uint64_t)0;
-  for (auto s = (uint64_t)0; s < strands; s++) {
-    auto count = strand_segments(s) + 1;
-    append_catmull_rom_strand(shape,
-        std::vector<vec3f>(positions.begin() + first, positions.begin() + first + count),
-        std::vector<float>(radii.begin() + first, radii.begin() + first + count),
-        colors.empty() ? std::vector<vec3f>{}
-                       : std::vector<vec3f>(colors.begin() + first, colors.begin() + first + count));
-    first += count;
-  }
+bool load_pbrt_camera(const std::string& filename, camera_data& camera, std::string& error,
+    const pbrt_params& params, std::vector<std::string>* warnings) {
+  auto scene                = scene_data{};
+  auto camera_params        = params;
+  camera_params.allow_empty = true;  // the world is not read: a camera alone
+  if (!load_pbrt_scene(filename, scene, error, camera_params, warnings, true)) return false;
+  camera = scene.cameras.front();
   return true;
 }
 
-bool load_hair_model(
-    const std::string& filename, shape_data& shape, std::string& error, vec3f* color) {
-  return load_hair_model(filename, shape, error, color, nullptr);
-}
+}  // namespace yocto
 
-bool save_hair_model(const std::string& filename, const shape_data& shape, std::string& error) {
-  // Strands: chains of curves (lines) where each starts at the previous end.
-  auto segments = std::vector<uint16_t>{};
-  auto vertices = std::vector<int>{};
-  auto add_element = [&](int start, int end, bool continues) {
-    if (!continues) {
-      segments.push_back(0);
-      vertices.push_back(start);
-    }
-    if (segments.back() == 65535) return false;
-    segments.back()++;
-    vertices.push_back(end);
-    return true;
+// -----------------------------------------------------------------------------
+// PBRT CURVES
+// -----------------------------------------------------------------------------
+namespace yocto {
+
+bool save_pbrt_curves(const std::string& filename, const shape_data& shape,
+    std::string& error) {
+  auto gzipped = filename.size() > 3 && filename.substr(filename.size() - 3) == ".gz";
+  // Through fileio's checked temporary; zlib writes into a duplicate of its
+  // descriptor, so that finishing can still flush and measure the file.
+  auto output = output_file{};
+  if (!open_output_file(output, filename, error)) return false;
+  auto descriptor = dup(output.descriptor);
+  auto file = descriptor >= 0 ? gzdopen(descriptor, gzipped ? "wb6" : "wbT") : nullptr;
+  if (!file) {
+    if (descriptor >= 0) close(descriptor);
+    discard_output_file(output);
+    return error = filename + ": cannot open for writing", false;
+  }
+  auto ok   = true;
+  auto line = std::string{};
+  char buffer[512];
+  auto write = [&](const char* text, int size) {
+    if (ok && gzwrite(file, text, size) != size) ok = false;
   };
-  auto num_vertices = (int)shape.positions.size();
-  auto in_range = [&](int v) { return v >= 0 && v < num_vertices; };
-  for (auto i = 0; i < (int)shape.curves.size(); i++) {
-    auto& c = shape.curves[i];
-    if (!in_range(c.x) || !in_range(c.w)) {
-      error = filename + ": curve " + std::to_string(i) + " references a missing vertex";
-      return false;
-    }
-    if (!add_element(c.x, c.w, i > 0 && shape.curves[i - 1].w == c.x)) {
-      error = filename + ": a strand has more than 65535 segments";
-      return false;
-    }
+  auto header = std::string("# hair curves written by yocto-hair's generator\n");
+  write(header.data(), (int)header.size());
+  for (auto& curve : shape.curves) {
+    auto& p = shape.positions;
+    auto  r = [&](int i) { return shape.radius.empty() ? 0.0f : shape.radius[i]; };
+    auto size = std::snprintf(buffer, sizeof(buffer),
+        "Shape \"curve\" \"string type\" \"cylinder\" \"point3 P\" [ %.7g %.7g %.7g %.7g %.7g "
+        "%.7g %.7g %.7g %.7g %.7g %.7g %.7g ] \"float width0\" %.7g \"float width1\" %.7g\n",
+        p[curve.x].x, p[curve.x].y, p[curve.x].z, p[curve.y].x, p[curve.y].y, p[curve.y].z,
+        p[curve.z].x, p[curve.z].y, p[curve.z].z, p[curve.w].x, p[curve.w].y, p[curve.w].z,
+        2 * r(curve.x), 2 * r(curve.w));
+    write(buffer, size);
   }
-  for (auto i = 0; i < (int)shape.lines.size(); i++) {
-    auto& l = shape.lines[i];
-    if (!in_range(l.x) || !in_range(l.y)) {
-      error = filename + ": line " + std::to_string(i) + " references a missing vertex";
-      return false;
-    }
-    if (!add_element(l.x, l.y, i > 0 && shape.lines[i - 1].y == l.x)) {
-      error = filename + ": a strand has more than 65535 segments";
-      return false;
-    }
+  if (gzclose(file) != Z_OK) ok = false;
+  // The bytes went through zlib's descriptor: the size check counts them.
+  auto status = (struct stat){};
+  if (ok && fstat(output.descriptor, &status) == 0) output.written = (size_t)status.st_size;
+  if (!ok) {
+    discard_output_file(output);
+    return error = filename + ": cannot write file", false;
   }
-  if (segments.empty()) {
-    error = filename + ": the shape has no curves or lines to save";
-    return false;
-  }
-  auto has_radius = shape.radius.size() == shape.positions.size();
-  auto has_colors = shape.colors.size() == shape.positions.size();
-  auto header     = hair_header{};
-  header.num_strands = (uint32_t)segments.size();
-  header.num_points  = (uint32_t)vertices.size();
-  header.flags       = hair_has_segments | hair_has_points |
-                 (has_radius ? (uint32_t)hair_has_thickness : 0u) |
-                 (has_colors ? (uint32_t)hair_has_color : 0u);
-  std::snprintf(header.info, sizeof(header.info), "yocto-hair");
-  auto data = std::string((const char*)&header, sizeof(header));
-  data.append((const char*)segments.data(), segments.size() * sizeof(uint16_t));
-  for (auto v : vertices) data.append((const char*)&shape.positions[v], 12);
-  if (has_radius) {
-    for (auto v : vertices) {
-      auto thickness = 2 * shape.radius[v];
-      data.append((const char*)&thickness, 4);
-    }
-  }
-  // The file's arrays in order: transparency (never written), then colours.
-  if (has_colors) {
-    for (auto v : vertices) data.append((const char*)&shape.colors[v], 12);
-  }
-  // save_text writes bytes as they are, through a temporary name.
-  return save_text(filename, data, error);
-}
-
-bool load_hair_scene(const std::string& filename, scene_data& scene, std::string& error,
-    const pbrt_params& params) {
-  scene            = {};
-  auto shape       = shape_data{};
-  auto color       = vec3f{0, 0, 0};
-  auto color_array = false;
-  if (!load_hair_model(filename, shape, error, &color, &color_array)) return false;
-  if (shape.curves.empty()) {
-    error = filename + ": the model has no strand with a segment";
-    return false;
-  }
-  if (params.curves_as_lines) shape = curves_to_lines(shape, params.segments);
-  auto material = material_data{};
-  material.type = material_type::hair;
-  if (color_array) {
-    // Chiang's inversion needs a reflectance strictly inside (0, 1).
-    material.hair.has_color = true;
-    material.hair.color     = glm::clamp(color, vec3f{0.01f}, vec3f{0.99f});
-  }
-  auto name = std::filesystem::path(filename).stem().string();
-  scene.shapes.push_back(std::move(shape));
-  scene.shape_names.push_back(name);
-  scene.materials.push_back(material);
-  scene.material_names.push_back("hair");
-  scene.instances.push_back({identity3x4f, 0, 0});
-  scene.instance_names.push_back(name);
-  scene.environments.push_back({identity3x4f, {1, 1, 1}, -1});
-  scene.environment_names.push_back("sky");
-  add_missing_camera(scene);
-  return validate_loaded_scene(scene, filename, error);
+  if (!commit_output_file(output, error)) return false;
+  return true;
 }
 
 }  // namespace yocto

@@ -1,13 +1,14 @@
 //
-// # Yocto/PbrtIO: pbrt scenes and Cem Yuksel's .hair models
+// # Yocto/PbrtIO: pbrt scenes
 //
 // Imports the subset of pbrt-v3 and pbrt-v4 scene syntax that real hair scenes
 // use into the scene model: `Include`/`Import` of plain and gzip'd files, the
 // transform directives and blocks, perspective cameras, film, sampler and
 // integrator defaults, infinite, distant and diffuse area lights, `hair`,
 // diffuse and coated materials, and the shapes `curve`, `sphere`, `disk`,
-// `trianglemesh` and `plymesh`. Also reads and writes Cem Yuksel's binary
-// `.hair` format.
+// `trianglemesh` and `plymesh` (through yocto_ply) with environment maps
+// (through yocto_image). Also gives a scene's camera alone, and writes curves
+// in pbrt's syntax (stand-in geometry for scenes that include it).
 //
 // Conventions of the import:
 // - World coordinates are kept as pbrt's numbers. pbrt's camera space is
@@ -33,6 +34,7 @@
 #include <string>
 #include <vector>
 
+#include "yocto_fileio.h"
 #include "yocto_scene.h"
 
 // -----------------------------------------------------------------------------
@@ -42,55 +44,47 @@ namespace yocto {
 
 // Import options.
 struct pbrt_params {
-  bool lenient         = false;  // unknown directives become warnings
-  bool curves_as_lines = false;  // tessellate Bezier curves into line segments
-  int  segments        = 4;      // segments per Bezier curve when curves_as_lines
-  bool allow_empty     = false;  // accept a scene with nothing to render (camera only)
+  bool   lenient         = false;  // unknown directives become warnings
+  bool   curves_as_lines = false;  // tessellate Bezier curves into line segments
+  int    segments        = 4;      // segments per Bezier curve when curves_as_lines
+  bool   allow_empty     = false;  // accept a scene with nothing to render (camera only)
+  double max_memory      = default_memory_limit();  // bytes the load may use
 };
 
 // Loads a pbrt-v3 or pbrt-v4 scene (plain or .gz) into the scene model.
 // Warnings are appended to `warnings` if given, printed to stderr otherwise.
 // A scene without shapes or an environment light is an error unless
 // params.allow_empty. Strings must be UTF-8; the files the scene names must
-// be regular files. The load keeps within load_memory_limit (yocto_sceneio.h):
-// the scene so far, the text of open files, parameter lists and the
-// resampling of environment maps are checked before they grow past it; a
-// .gz file may inflate to at most 100 times its size (past 16 MiB); and the
-// text read with all Includes, each counted as at least 1 MiB, to at most
-// 4 times the limit.
+// be regular files. The load keeps within params.max_memory: the scene so
+// far, the text of open files, parameter lists and the resampling of
+// environment maps are checked before they grow past it; a .gz file may
+// inflate to at most 100 times its size (past 16 MiB); and the text read
+// with all Includes, each counted as at least 1 MiB, to at most 4 times the
+// limit.
 bool load_pbrt_scene(const std::string& filename, scene_data& scene,
     std::string& error, const pbrt_params& params = {},
     std::vector<std::string>* warnings = nullptr);
 
-// Tessellates cubic Bezier curves into `segments` line segments each; curves
-// that share an end vertex share the line vertex too (one polyline a strand).
-shape_data curves_to_lines(const shape_data& curves, int segments);
+// The first camera of a pbrt scene (plain or .gz), parsing only up to the
+// first WorldBegin: the world and what it Includes are never read, so the
+// camera of a scene whose geometry is missing (what stand-ins are for) still
+// loads. The camera is load_pbrt_scene's for the same text; no WorldBegin is
+// an error. Errors and warnings name the file, as load_pbrt_scene's do.
+bool load_pbrt_camera(const std::string& filename, camera_data& camera,
+    std::string& error, const pbrt_params& params = {},
+    std::vector<std::string>* warnings = nullptr);
 
 }  // namespace yocto
 
 // -----------------------------------------------------------------------------
-// CEM YUKSEL'S .HAIR MODELS
+// PBRT CURVES
 // -----------------------------------------------------------------------------
 namespace yocto {
 
-// Loads a .hair model as a curves shape: a Catmull-Rom spline through each
-// strand's points, converted to cubic Bezier segments; radius is half the
-// file's thickness. If `color` is given it receives the mean of the colour
-// array, or the header's default colour if the file has no colour array.
-bool load_hair_model(const std::string& filename, shape_data& shape,
-    std::string& error, vec3f* color = nullptr);
-
-// Saves the strands of a curves or lines shape as a .hair model: the points
-// are the curve end points (line vertices), thickness is twice the radius.
-bool save_hair_model(
-    const std::string& filename, const shape_data& shape, std::string& error);
-
-// Builds a scene around a .hair model: the curves shape (or lines if
-// params.curves_as_lines), a hair material (pbrt's default, eumelanin 1.3,
-// or the file's colour if it has a colour array), a camera framing it and a
-// constant white environment.
-bool load_hair_scene(const std::string& filename, scene_data& scene,
-    std::string& error, const pbrt_params& params = {});
+// Writes curves in pbrt's syntax (`Shape "curve"`, one per Bezier segment,
+// `point3 P` and widths as diameters) to .pbrt or gzip'd .pbrt.gz.
+bool save_pbrt_curves(const std::string& filename, const shape_data& shape,
+    std::string& error);
 
 }  // namespace yocto
 

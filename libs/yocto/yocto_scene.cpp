@@ -597,6 +597,16 @@ bool validate_scene(const scene_data& scene, std::string& error) {
   return true;
 }
 
+// A converted scene is validated like a json one (what the directives cannot
+// see alone, e.g. a Scale 0 0 0 instance); on error it is left empty.
+bool validate_loaded_scene(
+    scene_data& scene, const std::string& filename, std::string& error) {
+  if (validate_scene(scene, error)) return true;
+  error = filename + ": " + error;
+  scene = {};
+  return false;
+}
+
 void add_missing_camera(scene_data& scene) {
   if (!scene.cameras.empty()) return;
   auto bounds = compute_bounds(scene);
@@ -867,6 +877,57 @@ shape_data make_quad_shape(const vec2f& size) {
   shape.texcoords = {{0, 0}, {1, 0}, {1, 1}, {0, 1}};
   shape.triangles = {{0, 1, 2}, {0, 2, 3}};
   return shape;
+}
+
+}  // namespace yocto
+
+// -----------------------------------------------------------------------------
+// CURVES TO LINES
+// -----------------------------------------------------------------------------
+namespace yocto {
+
+shape_data curves_to_lines(const shape_data& curves, int segments) {
+  segments        = std::max(segments, 1);
+  auto lines      = shape_data{};
+  auto has_radius = curves.radius.size() == curves.positions.size();
+  auto has_colors = curves.colors.size() == curves.positions.size();
+  auto num_vertices = (int)curves.positions.size();
+  // Line vertex of each curve end point, so strands share their joints.
+  auto end_vertex = std::vector<int>(curves.positions.size(), -1);
+  auto emit       = [&](const vec4i& c, float u) {
+    auto& p = curves.positions;
+    lines.positions.push_back(eval_bezier(p[c.x], p[c.y], p[c.z], p[c.w], u));
+    if (has_radius) {
+      auto& r = curves.radius;
+      lines.radius.push_back(eval_bezier(r[c.x], r[c.y], r[c.z], r[c.w], u));
+    }
+    if (has_colors) {
+      auto& k = curves.colors;
+      lines.colors.push_back(eval_bezier(k[c.x], k[c.y], k[c.z], k[c.w], u));
+    }
+    return (int)lines.positions.size() - 1;
+  };
+  lines.positions.reserve(curves.curves.size() * segments + 1);
+  lines.lines.reserve(curves.curves.size() * segments);
+  for (auto& c : curves.curves) {
+    if (glm::any(glm::lessThan(c, vec4i{0})) ||
+        glm::any(glm::greaterThanEqual(c, vec4i{num_vertices})))
+      continue;
+    if (end_vertex[c.x] < 0) end_vertex[c.x] = emit(c, 0);
+    auto previous = end_vertex[c.x];
+    for (auto s = 1; s <= segments; s++) {
+      auto next = -1;
+      if (s < segments) {
+        next = emit(c, (float)s / segments);
+      } else {
+        if (end_vertex[c.w] < 0) end_vertex[c.w] = emit(c, 1);
+        next = end_vertex[c.w];
+      }
+      lines.lines.push_back({previous, next});
+      previous = next;
+    }
+  }
+  return lines;
 }
 
 }  // namespace yocto

@@ -404,6 +404,10 @@ shape_data make_quad_shape(const vec2f& size);
 void append_catmull_rom_strand(shape_data& shape, const std::vector<vec3f>& points,
     const std::vector<float>& radii, const std::vector<vec3f>& colors = {});
 
+// Tessellates cubic Bezier curves into `segments` line segments each; curves
+// that share an end vertex share the line vertex too (one polyline a strand).
+shape_data curves_to_lines(const shape_data& curves, int segments);
+
 // The largest coordinate a scene may hold, in world space. Embree asserts on
 // a ray whose origin or direction has a component beyond 1.844e18 (its
 // FLT_LARGE) and drops primitives whose bounds pass it; 1e15 leaves a factor
@@ -419,6 +423,10 @@ inline constexpr float max_scene_coordinate = 1e15f;
 // parameters must lie in their ranges (check_hair_material). Returns false
 // with a message naming the element.
 bool validate_scene(const scene_data& scene, std::string& error);
+
+// validate_scene for a scene a loader has just converted from `filename`: on
+// error the message names the file and the scene is left empty.
+bool validate_loaded_scene(scene_data& scene, const std::string& filename, std::string& error);
 
 // Adds a default camera framing the scene bounds if the scene has none.
 void add_missing_camera(scene_data& scene);

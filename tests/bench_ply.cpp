@@ -1,12 +1,12 @@
 //
 // Speed of PLY fiber files: a hair model has millions of curves.
-// Run: build/tests/bench_sceneio (files go to the system temporary directory
+// Run: build/tests/bench_ply (files go to the system temporary directory
 // and are removed at the end).
 //
 
 #include <benchmark/benchmark.h>
 #include <unistd.h>
-#include <yocto/yocto_sceneio.h>
+#include <yocto/yocto_ply.h>
 
 #include <filesystem>
 

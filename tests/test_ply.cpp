@@ -4,11 +4,12 @@
 //
 
 #include <gtest/gtest.h>
+#include <yocto/yocto_ply.h>
 
 #include <cstring>
 #include <random>
 
-#include "test_sceneio.h"
+#include "test_io.h"
 
 using namespace yocto;
 using namespace yocto_test;

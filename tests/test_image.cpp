@@ -8,8 +8,9 @@
 
 #include <OpenImageIO/imageio.h>
 #include <sys/stat.h>
+#include <yocto/yocto_image.h>
 
-#include "test_sceneio.h"
+#include "test_io.h"
 
 using namespace yocto;
 using namespace yocto_test;
@@ -223,10 +224,7 @@ TEST(image, header_bombs_devices_and_fifos_are_refused_before_reading) {
       << error;
   // Compressed formats are bounded by the memory limit.
   ASSERT_TRUE(save_image(dir.file("small.exr"), make_image(64, 32, 1), error)) << error;
-  auto limit        = load_memory_limit;
-  load_memory_limit = 10000;
-  auto loaded       = load_image(dir.file("small.exr"), image, error);
-  load_memory_limit = limit;
+  auto loaded = load_image(dir.file("small.exr"), image, error, 10000);
   EXPECT_FALSE(loaded);
   EXPECT_TRUE(contains(error, dir.file("small.exr")) && contains(error, "64x32") &&
               contains(error, "over the memory limit"))

@@ -1,13 +1,15 @@
 //
-// Helpers shared by the sceneio tests: scratch directories and small files.
+// Helpers shared by the IO tests (PLY, images, json scenes, limits):
+// scratch directories and small files.
 //
 
-#ifndef YOCTO_TEST_SCENEIO_H_
-#define YOCTO_TEST_SCENEIO_H_
+#ifndef YOCTO_TEST_IO_H_
+#define YOCTO_TEST_IO_H_
 
 #include <gtest/gtest.h>
 #include <unistd.h>
-#include <yocto/yocto_sceneio.h>
+#include <yocto/yocto_fileio.h>
+#include <yocto/yocto_scene.h>
 
 #include <algorithm>
 #include <filesystem>
