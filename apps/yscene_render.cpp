@@ -12,6 +12,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <functional>
+#include <new>
 #include <yocto/yocto_bvh.h>
 
 #include "yocto_source_hash.h"  // generated from the sources: YOCTO_SOURCE_HASH
@@ -253,7 +254,7 @@ static bool parse_sample_range(
 
 // Loads, checks, builds the BVH, renders in passes and saves.
 static int render_scene(const render_options& options, trace_params params,
-    const CLI::App& command) {
+    const CLI::App& command) try {
   auto is_part = !options.sample_range.empty();
   if (is_part && path_extension(options.output) != ".exr")
     return print_error(options.output + ": a render part (--sample-range) is an OpenEXR "
@@ -503,6 +504,10 @@ static int render_scene(const render_options& options, trace_params params,
         clamped_energy_fraction(state), state.roulette_threshold);
   }
   return 0;
+} catch (const std::bad_alloc&) {
+  // Past the budget's checks (the BVH's included), the system or ulimit -v
+  // gave less: the scene is named, what a part wrote is a temporary.
+  return print_error(allocation_error(options.scene, "its render (BVH, image buffers, threads)"));
 }
 
 CLI::App* add_render_command(CLI::App& app, render_command& command, std::string& max_memory) {

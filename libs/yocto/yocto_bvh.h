@@ -107,7 +107,9 @@ struct scene_intersection {
   bool  hit      = false;
 };
 
-// Builds the BVH; returns false with a message on an Embree error.
+// Builds the BVH; returns false with a message on an Embree error. The
+// index buffers of strands are the scene's own curves and lines, not copies:
+// keep the scene alive and unchanged while its BVH is used.
 bool make_scene_bvh(scene_bvh& bvh, const scene_data& scene, const bvh_params& params,
     std::string& error);
 

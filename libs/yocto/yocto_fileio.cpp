@@ -29,6 +29,17 @@
 // -----------------------------------------------------------------------------
 namespace yocto {
 
+// The address space the process maps now (VmSize), from /proc/self/statm;
+// 0 where that cannot be read.
+static double mapped_bytes() {
+  auto file  = std::fopen("/proc/self/statm", "r");
+  auto pages = 0ll;
+  if (!file) return 0;
+  if (std::fscanf(file, "%lld", &pages) != 1) pages = 0;
+  std::fclose(file);
+  return (double)pages * (double)sysconf(_SC_PAGE_SIZE);
+}
+
 double default_memory_limit() {
   auto pages = sysconf(_SC_PHYS_PAGES), page_size = sysconf(_SC_PAGE_SIZE);
   auto limit = pages > 0 && page_size > 0 ? (double)pages * (double)page_size
@@ -36,8 +47,19 @@ double default_memory_limit() {
   auto address_space = rlimit{};
   if (getrlimit(RLIMIT_AS, &address_space) == 0 &&
       address_space.rlim_cur != RLIM_INFINITY)
-    limit = std::min(limit, (double)address_space.rlim_cur);
-  return 0.75 * limit;
+    limit = std::min(limit, (double)address_space.rlim_cur - mapped_bytes());
+  return 0.75 * std::max(limit, 0.0);
+}
+
+std::string allocation_error(const std::string& filename, const std::string& what) {
+  auto address_space = rlimit{};
+  auto limited       = getrlimit(RLIMIT_AS, &address_space) == 0 &&
+                 address_space.rlim_cur != RLIM_INFINITY;
+  return filename + ": " + what + ": the memory it needs could not be allocated (" +
+         (limited ? "the address-space limit, ulimit -v, is " +
+                        std::to_string((long long)(address_space.rlim_cur >> 20)) + " MiB"
+                  : std::string("the system refused it")) +
+         "; --max-memory sets the budget of a load)";
 }
 
 bool check_load_memory(const std::string& filename, const std::string& what,

@@ -24,9 +24,16 @@
 namespace yocto {
 
 // The memory one load may ask for, in bytes, when the caller sets none: 3/4
-// of physical memory, or of the address-space limit (ulimit -v) when that is
-// lower. yscene passes --max-memory instead.
+// of physical memory, or of what the address-space limit (ulimit -v) leaves
+// beside the address space the process already maps (its libraries) when
+// that is lower. yscene passes --max-memory instead.
 double default_memory_limit();
+
+// The message for an allocation that failed (std::bad_alloc) while loading
+// or building `what` of `filename`: the system, or ulimit -v, gave less than
+// the budget let the load ask for. "FILENAME: WHAT: the memory it needs
+// could not be allocated (...)", naming the address-space limit if any.
+std::string allocation_error(const std::string& filename, const std::string& what);
 
 // Sizes read from a file (image pixels, element counts, inflated text,
 // generated geometry) are checked against the load's limit before anything

@@ -8,6 +8,7 @@
 #include <cstring>
 #include <filesystem>
 #include <limits>
+#include <new>
 
 // -----------------------------------------------------------------------------
 // HAIR FILES
@@ -172,8 +173,12 @@ static bool load_hair_model(const std::string& filename, shape_data& shape,
 }
 
 bool load_hair_model(const std::string& filename, shape_data& shape, std::string& error,
-    vec3f* color, double max_memory) {
+    vec3f* color, double max_memory) try {
   return load_hair_model(filename, shape, error, color, nullptr, max_memory);
+} catch (const std::bad_alloc&) {
+  // Past the budget's checks, the system (or ulimit -v) gave less.
+  error = allocation_error(filename, "its strands");
+  return false;
 }
 
 bool save_hair_model(const std::string& filename, const shape_data& shape, std::string& error) {

@@ -15,6 +15,7 @@
 #include <cstdio>
 #include <cstring>
 #include <limits>
+#include <new>
 
 // -----------------------------------------------------------------------------
 // IMAGES
@@ -135,7 +136,7 @@ static bool check_png_chunks(const std::string& filename, std::string& error) {
 }
 
 bool load_image(
-    const std::string& filename, texture_data& image, std::string& error, double max_memory) {
+    const std::string& filename, texture_data& image, std::string& error, double max_memory) try {
   image = {};
   // OpenImageIO opens the file itself: a device or fifo would never end.
   auto file_size = (size_t)0;
@@ -202,6 +203,10 @@ bool load_image(
     image.pixels[i] = rgb;
   }
   return true;
+} catch (const std::bad_alloc&) {
+  // Past the budget's checks, the system (or ulimit -v) gave less.
+  error = allocation_error(filename, "its pixels");
+  return false;
 }
 
 // Encodes `pixels`, laid out in the spec's channel formats, into `data` with
@@ -439,7 +444,7 @@ static bool parse_part_number(const std::string& text, int64_t& value) {
 }
 
 bool load_render_part(
-    const std::string& filename, render_part& part, std::string& error, double max_memory) {
+    const std::string& filename, render_part& part, std::string& error, double max_memory) try {
   part           = {};
   auto file_size = (size_t)0;
   if (!check_input_file(filename, file_size, error)) return false;
@@ -536,6 +541,10 @@ bool load_render_part(
     return false;
   }
   return true;
+} catch (const std::bad_alloc&) {
+  // Past the budget's checks, the system (or ulimit -v) gave less.
+  error = allocation_error(filename, "the part");
+  return false;
 }
 
 }  // namespace yocto

@@ -21,6 +21,7 @@
 #include <cstring>
 #include <filesystem>
 #include <map>
+#include <new>
 #include <string_view>
 #include <unordered_map>
 #include <unordered_set>
@@ -2063,7 +2064,16 @@ static bool parse_pbrt_file(pbrt_state& state, const std::string& filename, int 
       state.error     = location(state) + "expected a directive, got " + token_description(token);
       return false;
     }
-    if (!parse_directive(state, token.text)) {
+    auto parsed = false;
+    try {
+      parsed = parse_directive(state, token.text);
+    } catch (const std::bad_alloc&) {
+      // Named where it happened: the innermost file, line and directive.
+      if (state.error.empty())
+        state.error = allocation_error(
+            state.lexer->filename + ":" + std::to_string(state.line), directive_name(state));
+    }
+    if (!parsed) {
       if (state.error.empty()) set_error(state, "cannot parse directive");
       return false;
     }
@@ -2081,7 +2091,7 @@ static bool parse_pbrt_file(pbrt_state& state, const std::string& filename, int 
 
 static bool load_pbrt_scene(const std::string& filename, scene_data& scene,
     std::string& error, const pbrt_params& params, std::vector<std::string>* warnings,
-    bool camera_only) {
+    bool camera_only) try {
   scene       = {};
   auto state  = pbrt_state{};
   state.scene = &scene;
@@ -2137,6 +2147,10 @@ static bool load_pbrt_scene(const std::string& filename, scene_data& scene,
     }
   }
   return validate_loaded_scene(scene, filename, error);
+} catch (const std::bad_alloc&) {
+  // Past the budget's checks, the system (or ulimit -v) gave less.
+  error = allocation_error(filename, "the scene");
+  return false;
 }
 
 bool load_pbrt_scene(const std::string& filename, scene_data& scene, std::string& error,

@@ -10,6 +10,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <new>
 #include <string_view>
 #include <unordered_map>
 
@@ -523,10 +524,15 @@ static bool load_ply_shape(
 }
 
 bool load_shape(
-    const std::string& filename, shape_data& shape, std::string& error, double max_memory) {
+    const std::string& filename, shape_data& shape, std::string& error, double max_memory) try {
   shape = {};
   if (load_ply_shape(filename, shape, error, max_memory)) return true;
   shape = {};  // nothing half-read escapes
+  return false;
+} catch (const std::bad_alloc&) {
+  // Past the budget's checks, the system (or ulimit -v) gave less.
+  shape = {};
+  error = allocation_error(filename, "its elements");
   return false;
 }
 

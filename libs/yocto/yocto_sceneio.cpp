@@ -13,6 +13,7 @@
 #include <cstring>
 #include <filesystem>
 #include <iostream>
+#include <new>
 #include <nlohmann/json.hpp>
 #include <string_view>
 #include <unordered_map>
@@ -823,7 +824,7 @@ static bool load_scene_json(json_loader& loader, scene_data& scene) {
 }
 
 bool load_scene(const std::string& filename, scene_data& scene, std::string& error,
-    std::vector<std::string>* warnings, double max_memory) {
+    std::vector<std::string>* warnings, double max_memory) try {
   scene       = {};
   auto loader = json_loader{filename, path_dirname(filename), max_memory};
   auto ok     = load_scene_json(loader, scene);
@@ -837,6 +838,10 @@ bool load_scene(const std::string& filename, scene_data& scene, std::string& err
     scene = {};
   }
   return ok;
+} catch (const std::bad_alloc&) {
+  // Past the budget's checks, the system (or ulimit -v) gave less.
+  error = allocation_error(filename, "the scene");
+  return false;
 }
 
 }  // namespace yocto
