@@ -776,7 +776,7 @@ TEST(geometry, bvh_memory_budget_refuses_and_fails_cleanly) {
 
 // The curve pieces are planned before the build (plan_curve_pieces): none
 // for a straight strand, none when the rays of the render do not repay the
-// pieces' build (fewer than 6 a segment), all for a long render; within a
+// pieces' build (fewer than 9 a segment), all for a long render; within a
 // budget, the most bent segments only, and the build then keeps within it
 // (its peak, the build's temporaries included) and gives Embree the
 // planned number of curves. A curly groom of 2,000 strands (48,000 bent
@@ -795,12 +795,12 @@ TEST(geometry, curve_pieces_are_planned_from_rays_and_budget) {
   auto plan     = plan_curve_pieces(straight, params, 1e12, 0);
   EXPECT_EQ(plan.max_pieces, 1);
   auto segments = (double)curly.shapes[0].curves.size();
-  plan          = plan_curve_pieces(curly, params, 5 * segments, 0);
+  plan          = plan_curve_pieces(curly, params, 8 * segments, 0);
   EXPECT_EQ(plan.segments, (int64_t)segments);
   EXPECT_FALSE(plan.pays);
   EXPECT_EQ(plan.max_pieces, 1);
   EXPECT_EQ(plan.pieces, plan.segments);
-  auto full = plan_curve_pieces(curly, params, 7 * segments, 0);
+  auto full = plan_curve_pieces(curly, params, 10 * segments, 0);
   EXPECT_TRUE(full.pays);
   EXPECT_EQ(full.max_pieces, 4);
   EXPECT_EQ(full.threshold, 1.0f);

@@ -587,14 +587,15 @@ bool make_scene_bvh(scene_bvh& bvh, const scene_data& scene, const bvh_params& p
 // (100 compact): 175-190 (95-98) on a groom of 48,000 segments, 133 (54) on
 // the 3.3M-segment curly stand-in of issue 22, so the plan errs on the side
 // of the budget. A piece adds 3 vertices, an index and its entry in
-// bvh_curve_pieces; its build takes 2.4 CPU-us; splitting a share s of the
-// segments saves about 0.4 s CPU-us a ray (1.05 to 1.26 M Embree rays/s on
-// the stand-in for 0.81 more pieces a segment). So the pieces repay their
-// build when the render traces more than 2.4 / 0.4 = 6 rays a segment.
+// bvh_curve_pieces; its build takes 2.5 CPU-us (8.4 s against 5.0 s on 2 threads for
+// 2.67M pieces); splitting a share s of the segments saves about 0.27 s
+// CPU-us a ray (1.23 to 1.43 M Embree rays/s, 32 spp at 256x256, for 0.81
+// more pieces a segment). So the pieces repay their build when the render
+// traces more than 2.5 / 0.27, about 9 rays a segment.
 static const double embree_bytes_per_curve         = 190;
 static const double embree_compact_bytes_per_curve = 100;
 static const double piece_bytes                    = 3 * sizeof(vec4f) + 2 * sizeof(uint32_t);
-static const double payback_rays_per_segment       = 6;
+static const double payback_rays_per_segment       = 9;
 
 bvh_piece_plan plan_curve_pieces(const scene_data& scene, const bvh_params& params,
     double planned_rays, double max_bytes) {
