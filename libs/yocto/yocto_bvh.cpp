@@ -26,14 +26,17 @@ namespace yocto {
 struct embree_errors {
   std::mutex  mutex;
   std::string message;
+  bool        out_of_memory = false;  // the system refused Embree's memory
 };
 
 static void embree_error_callback(void* user, RTCError code, const char* message) {
   auto errors = (embree_errors*)user;
   auto lock   = std::lock_guard{errors->mutex};
-  if (errors->message.empty())
+  if (errors->message.empty()) {
     errors->message = "embree error " + std::to_string((int)code) + ": " +
                       (message ? message : "unknown");
+    errors->out_of_memory = code == RTC_ERROR_OUT_OF_MEMORY;
+  }
 }
 
 // What Embree holds, and the most it may (0: no limit); whether an
@@ -571,12 +574,16 @@ bool make_scene_bvh(scene_bvh& bvh, const scene_data& scene, const bvh_params& p
   bvh.build_seconds = std::chrono::duration<double>(
       std::chrono::steady_clock::now() - start).count();
   if (monitor->refused || !errors->message.empty()) {
+    // Over the budget, or the system (ulimit -v) gave less than it: either
+    // way a smaller BVH may still fit.
     auto refused = monitor->refused.load();
     error = refused ? "the BVH needs more than its memory budget of " +
                           std::to_string(monitor->limit) + " bytes"
-                    : errors->message;
+            : errors->out_of_memory
+                ? "the BVH's memory could not be allocated (" + errors->message + ")"
+                : errors->message;
     bvh             = {};
-    bvh.over_budget = refused;
+    bvh.over_budget = refused || errors->out_of_memory;
     return false;
   }
   return true;

@@ -96,7 +96,8 @@ struct scene_bvh {
   int64_t                                 peak_memory = 0;
   int64_t                                 build_peak_memory = 0;
   double                                  build_seconds = 0;
-  bool                                    over_budget = false;  // failed on max_bytes
+  // Failed on max_bytes, or on memory the system refused (ulimit -v).
+  bool                                    over_budget = false;
 };
 
 struct scene_intersection {
