@@ -342,8 +342,8 @@ static int render_scene(const render_options& options, trace_params params,
   // parts of one render agree) do not repay their build; the most bent
   // segments first within the budget. --curve-pieces given is kept even when
   // it does not repay, within the budget still.
-  auto built         = options;
-  auto planned_rays  = 2.0 * size.x * size.y * params.samples;
+  auto built        = options;
+  auto planned_rays = 2.0 * size.x * size.y * params.samples;
   if (command.count("--curve-pieces")) planned_rays = 1e30;
   auto plan = plan_curve_pieces(scene, bvh_params_, planned_rays, bvh_params_.max_bytes);
   bvh_params_.max_curve_pieces      = plan.max_pieces;
@@ -495,8 +495,9 @@ static int render_scene(const render_options& options, trace_params params,
       pieces += bvh.pieces[i].pieces.empty() ? shape.curves.size() : bvh.pieces[i].pieces.size();
     }
     std::printf("stats load_seconds=%.6f bvh_seconds=%.6f bvh_bytes=%lld segments=%zu "
-                "bvh_build_peak_bytes=%lld curve_pieces=%zu width=%d height=%d spp=%d render_seconds=%.6f render_cpu=%.6f rays=%lld "
-                "peak_memory=%lld clamped=%lld clamped_energy=%.6g roulette_threshold=%.6g\n",
+                "bvh_build_peak_bytes=%lld curve_pieces=%zu width=%d height=%d spp=%d "
+                "render_seconds=%.6f render_cpu=%.6f rays=%lld peak_memory=%lld clamped=%lld "
+                "clamped_energy=%.6g roulette_threshold=%.6g\n",
         load_time, bvh.build_seconds, (long long)bvh.peak_memory, segments,
         (long long)bvh.build_peak_memory, pieces, state.width,
         state.height, state.samples, render_time, render_cpu, (long long)state.rays.load(),
