@@ -30,13 +30,16 @@
 namespace yocto {
 
 // The address space the process maps now (VmSize), from /proc/self/statm;
-// 0 where that cannot be read.
+// 0 where that cannot be read. Nothing is allocated (no FILE buffer): this
+// runs under a lowered ulimit -v too.
 static double mapped_bytes() {
-  auto file  = std::fopen("/proc/self/statm", "r");
+  auto descriptor = open("/proc/self/statm", O_RDONLY | O_CLOEXEC);
+  if (descriptor < 0) return 0;
+  char text[64] = {};
+  auto size     = read(descriptor, text, sizeof(text) - 1);
+  close(descriptor);
   auto pages = 0ll;
-  if (!file) return 0;
-  if (std::fscanf(file, "%lld", &pages) != 1) pages = 0;
-  std::fclose(file);
+  if (size <= 0 || std::from_chars(text, text + size, pages).ec != std::errc{}) return 0;
   return (double)pages * (double)sysconf(_SC_PAGE_SIZE);
 }
 
