@@ -105,6 +105,14 @@ static vec4f fiber_vertex(const shape_data& shape, int index) {
   return {shape.positions[index], r};
 }
 
+// Do all of an element's vertex indices fall within the shape's positions?
+template <typename Element>
+static bool element_in_range(const shape_data& shape, const Element& element) {
+  for (auto k = 0; k < (int)element.length(); k++)
+    if (element[k] < 0 || element[k] >= (int)shape.positions.size()) return false;
+  return true;
+}
+
 // Embree's curve index buffers hold the first vertex of each segment and take
 // the next ones consecutively. Shapes whose elements are consecutive (strands)
 // share their vertices; others get a vertex copy per element.
@@ -163,9 +171,7 @@ static RTCGeometry make_curve_geometry(
 // from the chord (which bounds the curve's) over twice the largest radius;
 // 0 for a straight segment or one with indices out of range.
 static float segment_bend_ratio(const shape_data& shape, const vec4i& c) {
-  auto count = (int)shape.positions.size();
-  if (glm::any(glm::lessThan(c, vec4i{0})) || glm::any(glm::greaterThanEqual(c, vec4i{count})))
-    return 0;
+  if (!element_in_range(shape, c)) return 0;
   auto& p     = shape.positions;
   auto  chord = p[c.w] - p[c.x];
   auto  along = dot(chord, chord) > 0 ? normalize(chord) : vec3f{0, 0, 0};
@@ -220,12 +226,8 @@ static RTCGeometry make_curve_pieces_geometry(RTCDevice device, const shape_data
   auto indices  = (uint32_t*)rtcSetNewGeometryBuffer(geometry, RTC_BUFFER_TYPE_INDEX, 0,
       RTC_FORMAT_UINT, sizeof(uint32_t), npieces);
   if (!indices) return release_unbuilt(geometry);
-  auto count = (int)shape.positions.size();
-  auto valid = [&](const vec4i& c) {
-    return !glm::any(glm::lessThan(c, vec4i{0})) &&
-           !glm::any(glm::greaterThanEqual(c, vec4i{count}));
-  };
-  auto next = (size_t)0;
+  auto valid = [&](const vec4i& c) { return element_in_range(shape, c); };
+  auto next  = (size_t)0;
   for (size_t i = 0; i < npieces; i++) {
     auto shares = false;
     if (i > 0) {
@@ -278,14 +280,9 @@ static RTCGeometry make_curve_pieces_geometry(RTCDevice device, const shape_data
 static std::vector<uint32_t> make_fiber_caps(const shape_data& shape) {
   auto caps     = std::vector<uint32_t>{};
   auto add_caps = [&](const auto& elements) {
-    auto& p     = shape.positions;
-    auto  count = (int)p.size();
+    auto& p = shape.positions;
     if (elements.empty() || elements.size() >= (1u << 31)) return;
-    auto valid = [&](const auto& element) {
-      for (auto k = 0; k < (int)element.length(); k++)
-        if (element[k] < 0 || element[k] >= count) return false;
-      return true;
-    };
+    auto valid = [&](const auto& element) { return element_in_range(shape, element); };
     // Every segment end with its position's bits (+0 for -0). An end on the
     // same vertex as its neighbour element's (strands) is joined; the others
     // are sorted so that ends at one position are neighbours, and are then
@@ -610,11 +607,11 @@ bvh_piece_plan plan_curve_pieces(const scene_data& scene, const bvh_params& para
   plan.max_pieces = std::clamp(params.max_curve_pieces, 1, 4);
   plan.threshold  = params.curve_piece_threshold;
   auto per_curve  = params.compact ? embree_compact_bytes_per_curve : embree_bytes_per_curve;
-  // The split segments' bend ratios (and pieces) of the shapes in use.
+  // The unsplit BVH of the shapes in use; whether pieces would pay, before
+  // their bends are measured.
   auto used = std::vector<bool>(scene.shapes.size(), false);
   for (auto& instance : scene.instances)
     if (instance.shape >= 0 && instance.shape < (int)used.size()) used[instance.shape] = true;
-  auto ratios = std::vector<float>{};
   for (auto i = 0; i < (int)scene.shapes.size(); i++) {
     auto& shape = scene.shapes[i];
     if (!used[i]) continue;
@@ -622,8 +619,19 @@ bvh_piece_plan plan_curve_pieces(const scene_data& scene, const bvh_params& para
     plan.bytes += per_curve * elements + sizeof(vec4f) * shape.positions.size() +
                   sizeof(uint32_t) * elements;
     plan.segments += (int64_t)shape.curves.size();
-    plan.pieces += (int64_t)shape.curves.size();
-    if (plan.max_pieces <= 1 || shape.curves.size() >= (1u << 28)) continue;
+  }
+  plan.pieces = plan.segments;
+  auto none   = [&]() {
+    plan.max_pieces = 1;
+    return plan;
+  };
+  plan.pays = planned_rays >= payback_rays_per_segment * (double)plan.segments;
+  if (!plan.pays || plan.max_pieces <= 1) return none();
+  // The split segments' bend ratios.
+  auto ratios = std::vector<float>{};
+  for (auto i = 0; i < (int)scene.shapes.size(); i++) {
+    auto& shape = scene.shapes[i];
+    if (!used[i] || shape.curves.size() >= (1u << 28)) continue;
     for (auto& c : shape.curves) {
       auto ratio = segment_bend_ratio(shape, c);
       if (segment_pieces(ratio, plan.threshold, plan.max_pieces) > 1) ratios.push_back(ratio);
@@ -634,13 +642,7 @@ bvh_piece_plan plan_curve_pieces(const scene_data& scene, const bvh_params& para
   };
   auto extra_pieces = (int64_t)0;
   for (auto ratio : ratios) extra_pieces += extra(ratio);
-  auto none = [&]() {
-    plan.max_pieces = 1;
-    return plan;
-  };
   if (extra_pieces == 0) return none();
-  plan.pays = planned_rays >= payback_rays_per_segment * (double)plan.segments;
-  if (!plan.pays) return none();
   // Within the budget: the most bent segments first.
   auto bytes_per_piece = per_curve + piece_bytes;
   auto room = max_bytes > 0 ? (max_bytes - plan.bytes) / bytes_per_piece : 1e30;
