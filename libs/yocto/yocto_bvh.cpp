@@ -376,13 +376,36 @@ static RTCGeometry make_triangle_geometry(RTCDevice device, const shape_data& sh
 // a ray that starts inside the fibre, and is ignored. Normals and directions
 // transform so that the sign of their dot product is the same in every
 // space, instanced or not.
+static bool hit_from_inside(const RTCFilterFunctionNArguments* args, unsigned i) {
+  auto inward = RTCRayN_dir_x(args->ray, args->N, i) * RTCHitN_Ng_x(args->hit, args->N, i) +
+                RTCRayN_dir_y(args->ray, args->N, i) * RTCHitN_Ng_y(args->hit, args->N, i) +
+                RTCRayN_dir_z(args->ray, args->N, i) * RTCHitN_Ng_z(args->hit, args->N, i);
+  return inward > 0;
+}
 static void ignore_hits_from_inside(const RTCFilterFunctionNArguments* args) {
   for (auto i = 0u; i < args->N; i++) {
+    if (args->valid[i] == -1 && hit_from_inside(args, i)) args->valid[i] = 0;
+  }
+}
+
+// The same for closest hits of an unsplit shape (its geometry's user data),
+// which also start fetching the hit segment's vertex indices: Embree's leaves
+// hold copies of the vertices, so eval_fiber_point's first read would miss
+// the cache, and started here the fetch overlaps the rest of the traversal.
+static void filter_closest_fiber_hits(const RTCFilterFunctionNArguments* args) {
+  auto& shape = *(const shape_data*)args->geometryUserPtr;
+  for (auto i = 0u; i < args->N; i++) {
     if (args->valid[i] != -1) continue;
-    auto inward = RTCRayN_dir_x(args->ray, args->N, i) * RTCHitN_Ng_x(args->hit, args->N, i) +
-                  RTCRayN_dir_y(args->ray, args->N, i) * RTCHitN_Ng_y(args->hit, args->N, i) +
-                  RTCRayN_dir_z(args->ray, args->N, i) * RTCHitN_Ng_z(args->hit, args->N, i);
-    if (inward > 0) args->valid[i] = 0;
+    if (hit_from_inside(args, i)) {
+      args->valid[i] = 0;
+      continue;
+    }
+    auto element = RTCHitN_primID(args->hit, args->N, i);
+    if (!shape.curves.empty()) {
+      __builtin_prefetch(shape.curves.data() + element);
+    } else {
+      __builtin_prefetch(shape.lines.data() + element);
+    }
   }
 }
 
@@ -407,7 +430,13 @@ static RTCGeometry make_shape_geometry(RTCDevice device, const shape_data& shape
   }
   // Round fibres only: a flat fibre faces every ray.
   if (geometry && shape.triangles.empty() && !params.flat_curves) {
-    rtcSetGeometryIntersectFilterFunction(geometry, ignore_hits_from_inside);
+    // A split shape's hits are pieces, not its segments.
+    if (pieces.pieces.empty()) {
+      rtcSetGeometryIntersectFilterFunction(geometry, filter_closest_fiber_hits);
+      rtcSetGeometryUserData(geometry, (void*)&shape);
+    } else {
+      rtcSetGeometryIntersectFilterFunction(geometry, ignore_hits_from_inside);
+    }
     rtcSetGeometryOccludedFilterFunction(geometry, ignore_hits_from_inside);
   }
   if (geometry) rtcCommitGeometry(geometry);
