@@ -212,6 +212,7 @@ static std::string render_settings(const scene_data& scene, const trace_params& 
   line("clamp", number(params.clamp));
   // Only when on, so that the settings of renders without AOVs stay as they were.
   if (params.aovs) line("aovs", "1");
+  if (params.adaptive) line("adaptive", "1");
   line("hair", std::string(params.hair_sampling.four_numbers ? "four-numbers" : "demux") +
                    (params.hair_sampling.per_hit ? " per-hit" : "") +
                    (params.hair_sampling.mixture_weight ? " mixture-weight" : "") +
@@ -398,7 +399,7 @@ static int render_scene(const render_options& options, trace_params params,
       // Saving is not rendering: its time is left out of the figures.
       auto save_start = std::chrono::steady_clock::now();
       auto filename   = checkpoint_filename(options.output, state.samples);
-      auto layers   = get_aov_layers(state.width, state.height, state.aov_sums, state.samples);
+      auto layers   = get_aov_layers(state);
       if (!save_render_image(filename, get_image(state), layers, error, options.exposure))
         return print_error(error);
       std::printf("checkpoint spp=%d seconds=%.6f cpu_seconds=%.6f rays=%lld file=%s\n",
@@ -449,8 +450,7 @@ static int render_scene(const render_options& options, trace_params params,
   }
   auto image  = is_part ? texture_data{} : get_image(state);
   auto layers = is_part ? std::vector<image_layer>{}
-                        : get_aov_layers(state.width, state.height, state.aov_sums,
-                              state.samples);  // none without --aovs
+                        : get_aov_layers(state);  // none without --aovs
   auto save   = [&](const std::string& filename, std::string& error, bool replace) {
     if (is_part) return save_render_part(filename, part, error, replace);
     return save_render_image(filename, image, layers, error, options.exposure, replace);
@@ -541,6 +541,9 @@ CLI::App* add_render_command(CLI::App& app, render_command& command, std::string
       ->check(CLI::NonNegativeNumber);
   render->add_option("--roulette-threshold", params.roulette_threshold,
           "paths whose throughput falls below this play Russian roulette");
+  render->add_flag("--adaptive", params.adaptive,
+      "adaptive sampling: a pilot gives each pixel more or fewer paths a sample by its "
+      "variance and cost, at the cost of uniform sampling (unbiased)");
   render->add_option("--split", params.split,
           "paths per camera ray, sharing its first hit");
   render->add_option("--shadow-threshold", params.shadow_threshold,

@@ -786,6 +786,31 @@ TEST(hair, lobe_weight_sample_draws_the_same_direction) {
   EXPECT_EQ(sample_hair_scattering(brdf, outgoing, vec2f{0.3f, 0.6f}), (vec3f{0, 0, 0}));
 }
 
+TEST(hair, lobe_weight_sample_of_four_numbers_draws_the_same_direction) {
+  // 100k random hits (random_weight_case, half with cached lobes; fixed
+  // seed) and four random numbers: the four-number sample_hair_scattering_
+  // weight returns exactly (bit for bit) the direction of the four-number
+  // sample_hair_scattering, a finite non-negative weight, and zero with a
+  // zero direction; and a direction other than the two-number sampler's for
+  // the first two numbers (the numbers are not demuxed).
+  auto rng      = make_rng(2025);
+  auto failures = 0, differing = 0;
+  const auto count = 100000;
+  for (auto i = 0; i < count && failures < 10; i++) {
+    auto test     = random_weight_case(rng, i % 2 == 0);
+    auto rn       = vec4f{rand1f(rng), rand1f(rng), rand1f(rng), rand1f(rng)};
+    auto sample   = sample_hair_scattering_weight(test.brdf, test.outgoing, rn);
+    auto incoming = sample_hair_scattering(test.brdf, test.outgoing, rn);
+    auto ok = sample.incoming == incoming && isfinite(sample.weight) &&
+              min_component(sample.weight) >= 0 &&
+              (incoming != vec3f{0, 0, 0} || sample.weight == vec3f{0, 0, 0});
+    if (!ok && failures++ < 10) ADD_FAILURE() << "sample " << i;
+    differing += incoming != sample_hair_scattering(test.brdf, test.outgoing, vec2f{rn.x, rn.y});
+  }
+  EXPECT_EQ(failures, 0);
+  EXPECT_GT(differing, count / 2);
+}
+
 TEST(hair, lobe_weight_luminance_equals_eval_over_pdf_luminance) {
   // Lobes are chosen by the luminance of A_p, so per sample
   // luminance(A_p / P(p)) = sum_q luminance(A_q) = luminance(eval / pdf) at

@@ -231,6 +231,43 @@ TEST(merge, split_renders_of_ranges_add_up_to_one_render) {
   EXPECT_LT(unsplit.rays, whole.rays);
 }
 
+// Adaptive sampling: 16 samples at once equal, bit for bit, the exact sums
+// of the parts 0:3, 3:5:9 (two calls) and 9:16 on 1 or 2 threads: every
+// part's pilot finds the render's rates, and a pixel's paths are numbered
+// by sample whatever the range; the merged sums over 16 give the image.
+TEST(merge, adaptive_renders_of_ranges_add_up_to_one_render) {
+  auto scene = make_small_hair_scene();
+  auto bvh   = scene_bvh{};
+  auto error = std::string{};
+  ASSERT_TRUE(make_scene_bvh(bvh, scene, {}, error)) << error;
+  auto params       = trace_params{};
+  params.resolution = 24;
+  params.samples    = 16;
+  params.adaptive   = true;
+  params.threads    = 2;
+  ASSERT_TRUE(check_trace_params(scene, params, error)) << error;
+  auto context = make_trace_context(scene, params);
+  auto whole   = trace_state{};
+  init_trace_state(whole, scene, params);
+  trace_samples(whole, scene, bvh, context, params, params.samples);
+  ASSERT_FALSE(whole.rates.empty());
+  auto added = std::vector<fixed_sum3>(whole.sums.size());
+  auto parts = std::vector<std::vector<int>>{{0, 3}, {3, 5, 9}, {9, 16}};
+  for (auto& part : parts) {
+    auto state = trace_state{};
+    init_trace_state(state, scene, params, part.front());
+    for (size_t k = 0; k + 1 < part.size(); k++) {
+      params.threads = 1 + (part.front() + (int)k) % 2;
+      trace_samples(state, scene, bvh, context, params, part[k + 1] - part[k]);
+    }
+    EXPECT_TRUE(state.rates == whole.rates) << part.front();
+    for (size_t i = 0; i < added.size(); i++) add_fixed(added[i], state.sums[i]);
+  }
+  EXPECT_TRUE(added == whole.sums);
+  EXPECT_TRUE(get_image(whole).pixels ==
+              get_image(whole.width, whole.height, added, params.samples).pixels);
+}
+
 // -----------------------------------------------------------------------------
 // FINGERPRINTS AND PART FILES
 // -----------------------------------------------------------------------------

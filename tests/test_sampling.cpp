@@ -10,6 +10,7 @@
 #include <gtest/gtest.h>
 #include <yocto/yocto_sampling.h>
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <cstring>
@@ -253,6 +254,100 @@ TEST(sampling, sobol_pairs_are_02_sequences) {
         }
       }
     }
+  }
+}
+
+// Whether 2^k points have 2^t points in every elementary interval of area
+// 2^(t - k) of the projection on dimensions d0 and d1: a (t,k,2)-net.
+static bool is_t_net(const std::vector<vec4f>& points, int d0, int d1, int k, int t) {
+  auto cells  = 1 << (k - t);
+  auto counts = std::vector<int>(cells);
+  for (auto a = 0; a <= k - t; a++) {
+    auto b = k - t - a;
+    std::fill(counts.begin(), counts.end(), 0);
+    for (auto& p : points) {
+      auto i = (int)std::floor(p[d0] * (float)(1 << a));
+      auto j = (int)std::floor(p[d1] * (float)(1 << b));
+      if (i < 0 || i >= (1 << a) || j < 0 || j >= (1 << b)) return false;
+      counts[(i << b) + j]++;
+    }
+    for (auto count : counts)
+      if (count != 1 << t) return false;
+  }
+  return true;
+}
+
+TEST(sampling, sobol4_points_are_jointly_stratified) {
+  // Sobol dimensions 2 and 3 by hand: 0, 1/2, 3/4, 1/4, 3/8, 7/8, 5/8, 1/8
+  // and 0, 1/2, 3/4, 1/4, 1/8, 5/8, 7/8, 3/8 (their direction numbers 1/2,
+  // 3/4, 3/8 and 1/2, 3/4, 1/8).
+  auto dimension2 = std::vector<float>{0, 0.5f, 0.75f, 0.25f, 0.375f, 0.875f, 0.625f, 0.125f};
+  auto dimension3 = std::vector<float>{0, 0.5f, 0.75f, 0.25f, 0.125f, 0.625f, 0.875f, 0.375f};
+  for (auto i = 0u; i < 8; i++) {
+    EXPECT_EQ(sobol_reversed(sobol_dimension2_tables, i), reverse_bits((uint32_t)(
+                                                               dimension2[i] * 4294967296.0)))
+        << i;
+    EXPECT_EQ(sobol_reversed(sobol_dimension3_tables, i), reverse_bits((uint32_t)(
+                                                               dimension3[i] * 4294967296.0)))
+        << i;
+  }
+  // For 2^k points, k = 0..10, the first ones and the aligned blocks m 2^k
+  // for m = 3 and 1000, three seeds: dimensions 0 and 1 are sample_sobol2f's
+  // point bit for bit (a (0,2)-sequence); every pair of the four dimensions
+  // is a (t,k,2)-net with t <= 2 (the largest t measured over these pairs
+  // and sizes); each dimension alone has one point in every 1 / 2^k.
+  for (auto seed : {(uint64_t)0, (uint64_t)1, (uint64_t)0x5eed1234abcdULL}) {
+    for (auto k = 0; k <= 10; k++) {
+      auto n = 1 << k;
+      for (auto m : {0u, 3u, 1000u}) {
+        auto points = std::vector<vec4f>(n);
+        for (auto s = 0; s < n; s++) {
+          auto index = m * (uint32_t)n + (uint32_t)s;
+          points[s]  = sample_sobol4f(index, seed);
+          auto pair  = sample_sobol2f(index, seed);
+          ASSERT_EQ(points[s].x, pair.x);
+          ASSERT_EQ(points[s].y, pair.y);
+        }
+        for (auto d0 = 0; d0 < 4; d0++) {
+          auto strata = std::vector<int>(n);
+          for (auto& p : points) strata[(int)std::floor(p[d0] * (float)n)]++;
+          ASSERT_TRUE(std::all_of(strata.begin(), strata.end(), [](int c) { return c == 1; }))
+              << "dimension " << d0 << " k " << k;
+          for (auto d1 = d0 + 1; d1 < 4; d1++) {
+            auto t = d0 == 0 && d1 == 1 ? 0 : std::min(2, k);
+            ASSERT_TRUE(is_t_net(points, d0, d1, k, t))
+                << "seed " << seed << " dimensions " << d0 << " " << d1 << " k " << k
+                << " block " << m;
+          }
+        }
+      }
+    }
+  }
+  // Not vacuous: dimensions 2 and 3 of 64 points are no (0,6,2)-net, and
+  // other seeds give other points.
+  auto points = std::vector<vec4f>(64);
+  for (auto s = 0; s < 64; s++) points[s] = sample_sobol4f((uint32_t)s, 7);
+  EXPECT_FALSE(is_t_net(points, 2, 3, 6, 0));
+  EXPECT_NE(sample_sobol4f(5, 7).z, sample_sobol4f(5, 8).z);
+}
+
+TEST(sampling, sequence4f_takes_two_pairs) {
+  // Where both pairs are Sobol pairs, the four numbers are one 4D Sobol
+  // point (the same for the same sample, whatever was drawn before); past
+  // them, the pairs' own numbers (Sobol, then the generator's).
+  auto state  = make_sequence(sequence_type::sobol, 3, 17, 5, 4);
+  auto first  = sample_sequence4f(state, 1);
+  auto again  = make_sequence(sequence_type::sobol, 3, 17, 5, 4);
+  sample_sequence2f(again, 0);
+  EXPECT_EQ(sample_sequence4f(again, 1), first);
+  auto edge = make_sequence(sequence_type::sobol, 3, 17, 5, 4);
+  auto last = sample_sequence4f(edge, 3);
+  auto pair = make_sequence(sequence_type::sobol, 3, 17, 5, 4);
+  EXPECT_EQ(last.x, sample_sequence2f(pair, 3).x);
+  EXPECT_EQ(last.y, sample_sequence2f(pair, 3).y);
+  for (auto value : {last.x, last.y, last.z, last.w}) {
+    EXPECT_GE(value, 0.0f);
+    EXPECT_LT(value, 1.0f);
   }
 }
 

@@ -79,7 +79,7 @@ inline vec3f rand3f(rng_state& rng) {
 // -----------------------------------------------------------------------------
 namespace yocto {
 
-inline uint32_t reverse_bits(uint32_t x) {
+inline constexpr uint32_t reverse_bits(uint32_t x) {
   x = ((x >> 1) & 0x55555555u) | ((x & 0x55555555u) << 1);
   x = ((x >> 2) & 0x33333333u) | ((x & 0x33333333u) << 2);
   x = ((x >> 4) & 0x0f0f0f0fu) | ((x & 0x0f0f0f0fu) << 4);
@@ -128,6 +128,45 @@ inline uint32_t sobol_dimension1(uint32_t index) {
 // Better LK Hash, 2021): Burley's listing 2 lets the seed in by one addition
 // only, so the top d digits take 2^d forms over all seeds instead of
 // 2^(2^d - 1), and sub-strata of a pixel stay correlated (test_sampling).
+// Sobol dimensions 2 and 3 by their direction numbers v_k = m_k 2^(32 - k),
+// from the primitive polynomials x^2 + x + 1 and x^3 + x + 1 and the
+// initial m of Joe and Kuo (Constructing Sobol Sequences with Better
+// Two-Dimensional Projections, 2008: 1 3, and 1 3 1), by the recurrence of
+// Bratley and Fox (1988). Bit-reversed byte tables, as dimension 1's.
+inline constexpr std::array<std::array<uint32_t, 256>, 4> make_sobol_tables(
+    int degree, uint32_t coefficients, std::array<uint32_t, 3> initial) {
+  auto m = std::array<uint32_t, 33>{};
+  for (auto k = 1; k <= 32; k++) {
+    if (k <= degree) {
+      m[k] = initial[k - 1];
+      continue;
+    }
+    m[k] = m[k - degree] ^ (m[k - degree] << degree);
+    for (auto j = 1; j < degree; j++) {
+      if (coefficients >> (degree - 1 - j) & 1) m[k] ^= m[k - j] << j;
+    }
+  }
+  auto tables = std::array<std::array<uint32_t, 256>, 4>{};
+  for (auto byte = 0; byte < 4; byte++) {
+    for (auto value = 0; value < 256; value++) {
+      auto result = 0u;
+      for (auto bit = 0; bit < 8; bit++) {
+        auto k = byte * 8 + bit + 1;
+        if (value >> bit & 1) result ^= reverse_bits(m[k] << (32 - k));
+      }
+      tables[byte][value] = result;
+    }
+  }
+  return tables;
+}
+inline constexpr auto sobol_dimension2_tables = make_sobol_tables(2, 1, {1, 3, 0});
+inline constexpr auto sobol_dimension3_tables = make_sobol_tables(3, 1, {1, 3, 1});
+inline uint32_t sobol_reversed(
+    const std::array<std::array<uint32_t, 256>, 4>& tables, uint32_t index) {
+  return tables[0][index & 0xff] ^ tables[1][index >> 8 & 0xff] ^
+         tables[2][index >> 16 & 0xff] ^ tables[3][index >> 24];
+}
+
 inline uint32_t laine_karras_permutation(uint32_t x, uint32_t seed) {
   x ^= x * 0x3d20adeau;
   x += seed;
@@ -163,6 +202,24 @@ inline vec2f sample_sobol2f(uint32_t index, uint64_t seed) {
   auto y = reverse_bits(
       laine_karras_permutation(sobol_dimension1_reversed(shuffled), (uint32_t)more));
   return {fixed_to_float(x), fixed_to_float(y)};
+}
+
+// Point `index` of a shuffled, Owen-scrambled 4D Sobol sequence: the four
+// numbers are jointly stratified (a (3,4)-sequence; dimensions 0 and 1 a
+// (0,2)-sequence), where two pairs of sample_sobol2f are stratified each on
+// its own.
+inline vec4f sample_sobol4f(uint32_t index, uint64_t seed) {
+  auto hash     = hash_uint64(seed);
+  auto more     = hash_uint64(hash);
+  auto shuffled = nested_uniform_scramble(index, (uint32_t)hash);
+  auto x = reverse_bits(laine_karras_permutation(shuffled, (uint32_t)(hash >> 32)));
+  auto y = reverse_bits(
+      laine_karras_permutation(sobol_dimension1_reversed(shuffled), (uint32_t)more));
+  auto z = reverse_bits(laine_karras_permutation(
+      sobol_reversed(sobol_dimension2_tables, shuffled), (uint32_t)(more >> 32)));
+  auto w = reverse_bits(laine_karras_permutation(
+      sobol_reversed(sobol_dimension3_tables, shuffled), (uint32_t)hash_uint64(more)));
+  return {fixed_to_float(x), fixed_to_float(y), fixed_to_float(z), fixed_to_float(w)};
 }
 
 }  // namespace yocto
@@ -208,6 +265,16 @@ inline vec2f sample_sequence2f(sequence_state& state, int pair) {
     return sample_sobol2f(state.index, state.key ^ ((uint64_t)pair << 40));
   }
   return rand2f(state.rng);
+}
+
+// Pairs `pair` and `pair + 1` of the sample as four jointly stratified
+// numbers (one 4D Sobol point) where both are Sobol pairs.
+inline vec4f sample_sequence4f(sequence_state& state, int pair) {
+  if (pair + 1 < state.sobol_pairs) {
+    return sample_sobol4f(state.index, state.key ^ ((uint64_t)pair << 40));
+  }
+  auto a = sample_sequence2f(state, pair), b = sample_sequence2f(state, pair + 1);
+  return {a.x, a.y, b.x, b.y};
 }
 
 }  // namespace yocto

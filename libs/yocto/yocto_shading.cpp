@@ -257,10 +257,12 @@ bool bsdf_takes_more_numbers(const material_point& point) {
 bsdf_sample sample_bsdf(const material_point& point, const vec3f& outgoing, float rnl,
     const vec2f& rn, const vec2f& more, bool needs_pdf) {
   auto sample = bsdf_sample{};
-  if (point.type == material_type::hair && !needs_pdf && !point.hair_sampling.four_numbers &&
-      !point.hair_sampling.mixture_weight) {
+  if (point.type == material_type::hair && !needs_pdf && !point.hair_sampling.mixture_weight) {
     // No pdf needed: the sampled lobe's own weight, no evaluation.
-    auto hair = sample_hair_scattering_weight(point.hair, outgoing, rn);
+    auto hair = point.hair_sampling.four_numbers
+                    ? sample_hair_scattering_weight(
+                          point.hair, outgoing, vec4f{rn.x, rn.y, more.x, more.y})
+                    : sample_hair_scattering_weight(point.hair, outgoing, rn);
     if (hair.incoming == vec3f{0, 0, 0} || !isfinite(hair.incoming)) return {};
     if (hair.weight == vec3f{0, 0, 0}) return {};
     sample.incoming = hair.incoming;

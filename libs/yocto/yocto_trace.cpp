@@ -359,10 +359,13 @@ static void scatter_path(const trace_walk& walk, material_point point, ray3f ray
 
     // BSDF sampling.
     auto lobe_roulette = sample_sequence2f(sequence, pairs + trace_pair_lobe_roulette);
-    auto rn            = sample_sequence2f(sequence, pairs + trace_pair_direction);
-    auto more = bsdf_takes_more_numbers(point)
-                    ? sample_sequence2f(sequence, pairs + trace_pair_direction_more)
-                    : vec2f{0, 0};
+    auto rn   = vec2f{0, 0}, more = vec2f{0, 0};
+    if (bsdf_takes_more_numbers(point)) {
+      auto numbers = sample_sequence4f(sequence, pairs + trace_pair_direction);
+      rn = {numbers.x, numbers.y}, more = {numbers.z, numbers.w};
+    } else {
+      rn = sample_sequence2f(sequence, pairs + trace_pair_direction);
+    }
     // The pdf only where an MIS weight will need it (0 otherwise).
     auto sample = sample_bsdf(point, outgoing, lobe_roulette.x, rn, more, samples_lights);
     if (sample.weight == vec3f{0, 0, 0}) break;
@@ -493,6 +496,9 @@ vec3f trace_radiance(const scene_data& scene, const scene_bvh& bvh,
 // -----------------------------------------------------------------------------
 namespace yocto {
 
+// Most paths a sample of an adaptive pixel.
+static const int adaptive_max_paths = 16;
+
 bool check_trace_params(const scene_data& scene, const trace_params& params,
     std::string& error) {
   if (scene.cameras.empty()) return error = "the scene has no camera", false;
@@ -507,6 +513,11 @@ bool check_trace_params(const scene_data& scene, const trace_params& params,
   // Split paths number their samples sample * split + k in 32 bits.
   if ((int64_t)params.samples * params.split > ((int64_t)1 << 32))
     return error = "samples times split must stay below 2^32", false;
+  // Adaptive pixels take up to 16 paths a sample, numbered in 32 bits too.
+  if (params.adaptive &&
+      (int64_t)params.samples * params.split * adaptive_max_paths > ((int64_t)1 << 32))
+    return error = "samples times split times 16 must stay below 2^32 with adaptive sampling",
+           false;
   if (!(params.roulette_threshold >= 0) || !std::isfinite(params.roulette_threshold))
     return error = "roulette threshold must be 0 (automatic) or positive", false;
   if (!(params.clamp >= 0)) return error = "clamp must be 0 (none) or positive", false;
@@ -516,8 +527,10 @@ bool check_trace_params(const scene_data& scene, const trace_params& params,
 
 double trace_image_bytes(const scene_data& scene, const trace_params& params) {
   auto size = camera_resolution(scene.cameras[params.camera], params.resolution);
+  // Adaptive sampling: the rates, and the pilot's variances, costs and a row.
+  auto adaptive = params.adaptive ? sizeof(float) + 3 * sizeof(double) : 0;
   return (double)size.x * (double)size.y *
-             (sizeof(fixed_sum3) + sizeof(vec3f) + 3 * sizeof(uint8_t)) +
+             (sizeof(fixed_sum3) + sizeof(vec3f) + 3 * sizeof(uint8_t) + adaptive) +
          trace_aov_bytes(scene, params);
 }
 
@@ -534,8 +547,10 @@ double trace_aov_bytes(const scene_data& scene, const trace_params& params) {
          (trace_aov_sums * sizeof(fixed_sum3) + 23 * sizeof(float));
 }
 
-std::vector<image_layer> get_aov_layers(int width, int height,
-    const std::vector<fixed_sum3>& aov_sums, int samples) {
+// The AOV layers with pixel i's sums scaled by scale(i).
+template <typename Scale>
+static std::vector<image_layer> get_aov_layers_scaled(int width, int height,
+    const std::vector<fixed_sum3>& aov_sums, const Scale& pixel_scale) {
   auto pixels = (size_t)width * (size_t)height;
   auto layers = std::vector<image_layer>{};
   if (aov_sums.size() != pixels * trace_aov_sums) return layers;
@@ -548,9 +563,9 @@ std::vector<image_layer> get_aov_layers(int width, int height,
   }
   layers.push_back({"depth", {"Z"}, std::vector<float>(pixels)});
   layers.push_back({"coverage", {"Y"}, std::vector<float>(pixels)});
-  auto scale = samples > 0 ? 1.0 / samples : 0.0;
   for (size_t i = 0; i < pixels; i++) {
-    auto sums = &aov_sums[i * trace_aov_sums];
+    auto scale = pixel_scale(i);
+    auto sums  = &aov_sums[i * trace_aov_sums];
     for (auto k = 0; k < 7; k++) {
       auto value = fixed_to_double(sums[k]) * scale;
       for (auto c = 0; c < 3; c++) layers[k].pixels[i * 3 + c] = (float)value[c];
@@ -560,6 +575,12 @@ std::vector<image_layer> get_aov_layers(int width, int height,
     layers[8].pixels[i] = (float)(extra[1] * scale);
   }
   return layers;
+}
+
+std::vector<image_layer> get_aov_layers(int width, int height,
+    const std::vector<fixed_sum3>& aov_sums, int samples) {
+  auto scale = samples > 0 ? 1.0 / samples : 0.0;
+  return get_aov_layers_scaled(width, height, aov_sums, [scale](size_t) { return scale; });
 }
 
 void init_trace_state(trace_state& state, const scene_data& scene, const trace_params& params,
@@ -577,8 +598,8 @@ void init_trace_state(trace_state& state, const scene_data& scene, const trace_p
   state.rays      = 0;
   state.nonfinite = 0;
   state.roulette_threshold = 0;
+  state.rates.clear();
 }
-
 
 // Runs f(begin, end) over [0, size) in chunks on `threads` threads (0 for
 // all), with the floating-point modes Embree asks for set in every thread.
@@ -693,6 +714,104 @@ float estimate_roulette_threshold(const scene_data& scene, const scene_bvh& bvh,
   return (float)std::clamp(threshold, 1.0 / 16, 1.0);
 }
 
+// The pilot of adaptive sampling (see the header): 2 paths a pixel, the
+// variance of their mean over channels and their rays, averaged over a
+// 7 x 7 box; then the rates by bisection on their scale, so that the
+// render's estimated rays stay within those of one path a pixel sample.
+std::vector<float> estimate_sample_rates(const scene_data& scene, const scene_bvh& bvh,
+    const trace_context& context, const trace_params& params, float roulette_threshold) {
+  if (!params.adaptive) return {};
+  auto  size   = camera_resolution(scene.cameras[params.camera], params.resolution);
+  auto& camera = scene.cameras[params.camera];
+  auto  pixels = (size_t)size.x * size.y;
+  auto  variance = std::vector<double>(pixels), cost = std::vector<double>(pixels);
+  auto  pilot    = params;
+  pilot.split    = 1;
+  auto seed = hash_uint64(params.seed ^ 0x7261746573ULL);  // "rates"
+  parallel_chunks(size.y, 1, params.threads, [&](int64_t begin, int64_t end) {
+    auto rays = (int64_t)0;
+    auto walk = trace_walk{scene, bvh, context, pilot, roulette_threshold, rays};
+    for (auto j = (int)begin; j < (int)end; j++) {
+      for (auto i = 0; i < size.x; i++) {
+        auto pixel    = (int64_t)j * size.x + i;
+        auto values   = std::array<vec3f, 2>{};
+        rays          = 0;
+        for (auto s = 0; s < 2; s++) {
+          auto sequence = make_sequence(pilot.sequence, seed, pixel, (uint32_t)s,
+              trace_bounce_pairs(pilot.sobol_bounces));
+          auto ray = sample_camera_ray(camera, i, j, size.x, size.y, sequence);
+          if (!is_traceable_ray(ray)) continue;
+          auto radiance = trace_path(walk, ray, sequence);
+          if (isfinite(radiance)) values[s] = radiance;
+        }
+        auto difference  = glm::dvec3(values[0] - values[1]);
+        variance[pixel]  = glm::dot(difference, difference) / 6;  // (a - b)^2 / 2, 3 channels
+        cost[pixel]      = std::max((double)rays / 2, 1.0);
+      }
+    }
+  });
+  // Box averages, rows then columns (the same sums whatever the threads).
+  auto box = [&](std::vector<double>& values) {
+    auto radius = 3;
+    auto row    = std::vector<double>(pixels);
+    for (auto j = 0; j < size.y; j++) {
+      for (auto i = 0; i < size.x; i++) {
+        auto sum = 0.0;
+        auto lo = std::max(i - radius, 0), hi = std::min(i + radius, size.x - 1);
+        for (auto k = lo; k <= hi; k++) sum += values[(size_t)j * size.x + k];
+        row[(size_t)j * size.x + i] = sum / (hi - lo + 1);
+      }
+    }
+    for (auto j = 0; j < size.y; j++) {
+      auto lo = std::max(j - radius, 0), hi = std::min(j + radius, size.y - 1);
+      for (auto i = 0; i < size.x; i++) {
+        auto sum = 0.0;
+        for (auto k = lo; k <= hi; k++) sum += row[(size_t)k * size.x + i];
+        values[(size_t)j * size.x + i] = sum / (hi - lo + 1);
+      }
+    }
+  };
+  box(variance);
+  box(cost);
+  // Fewer paths than one a sample: one every q samples, q a power of two
+  // that divides the sample count (up to 8), so that the render takes whole
+  // paths in every pixel.
+  auto max_every = 1;
+  while (max_every < 8 && params.samples % (max_every * 2) == 0) max_every *= 2;
+  auto quantize = [&](double rate) -> float {
+    if (rate >= 1) return (float)std::min((double)adaptive_max_paths, std::round(rate));
+    auto every = 1;
+    while (every < max_every && rate * every * std::sqrt(2.0) < 1) every *= 2;
+    return 1.0f / (float)every;
+  };
+  auto weights = std::vector<double>(pixels);
+  auto budget  = 0.0, total = 0.0;
+  for (size_t i = 0; i < pixels; i++) {
+    weights[i] = std::sqrt(variance[i] / cost[i]);
+    budget += cost[i];
+    total += weights[i] * cost[i];
+  }
+  // No variance anywhere: every pixel's first path is its value.
+  if (total == 0) return std::vector<float>(pixels, 1.0f / (float)max_every);
+  auto rates = std::vector<float>(pixels, 1.0f);
+  if (!std::isfinite(total)) return rates;
+  auto spent = [&](double scale) {
+    auto sum = 0.0;
+    for (size_t i = 0; i < pixels; i++) sum += quantize(scale * weights[i]) * cost[i];
+    return sum;
+  };
+  // The largest scale whose rounded rates cost no more than the budget.
+  auto low = 0.0, high = 4 * budget / total;
+  while (spent(high) <= budget && high < 1e30) low = high, high *= 2;
+  for (auto iteration = 0; iteration < 40; iteration++) {
+    auto middle = (low + high) / 2;
+    if (spent(middle) <= budget) low = middle;
+    else high = middle;
+  }
+  for (size_t i = 0; i < pixels; i++) rates[i] = quantize(low * weights[i]);
+  return rates;
+}
+
 // Adds `count` samples to every pixel of the image rows; with `records`, the
 // rays of row j go to (*records)[j].
 static void trace_rows(trace_state& state, const scene_data& scene, const scene_bvh& bvh,
@@ -708,8 +827,17 @@ static void trace_rows(trace_state& state, const scene_data& scene, const scene_
       auto pixel = j * state.width + i;
       auto& sum  = state.sums[pixel];
       auto  next = state.first + state.samples;
-      for (auto s = next; s < next + count; s++) {
-        auto sequence = make_sequence(params.sequence, params.seed, pixel, (uint32_t)s,
+      // Adaptive rates: m paths a sample (numbers s m ... s m + m - 1), each
+      // weighing 1 / m, or one path every q samples (numbers s / q) weighing
+      // q; the paths of any range of samples are a pure function of it.
+      auto rate  = state.rates.empty() ? 1.0f : state.rates[pixel];
+      auto paths = rate >= 1 ? (int)rate : 1;
+      auto every = rate >= 1 ? 1 : (int)std::lround(1 / rate);
+      auto path_weight = rate >= 1 ? 1.0f / (float)paths : (float)every;
+      for (auto n = (int64_t)next * paths; n < (int64_t)(next + count) * paths; n++) {
+        if (n % every != 0) continue;
+        auto s        = (uint32_t)(n / every);
+        auto sequence = make_sequence(params.sequence, params.seed, pixel, s,
             trace_bounce_pairs(params.sobol_bounces));
         auto ray = sample_camera_ray(camera, i, j, state.width, state.height, sequence);
         // validate_scene checked the camera; a ray that round-off still
@@ -725,15 +853,16 @@ static void trace_rows(trace_state& state, const scene_data& scene, const scene_
         auto add_aovs = [&](float lobe_scale) {
           if (!params.aovs) return;
           auto sums = &state.aov_sums[(size_t)pixel * trace_aov_sums];
-          add_fixed(sums[0], aov.albedo);
-          add_fixed(sums[1], aov.normal);
-          add_fixed(sums[2], aov.tangent);
+          add_fixed(sums[0], aov.albedo * path_weight);
+          add_fixed(sums[1], aov.normal * path_weight);
+          add_fixed(sums[2], aov.tangent * path_weight);
           for (auto p = 0; p < 4; p++) {
-            auto lobe = aov.lobes[p] * lobe_scale;
+            auto lobe = aov.lobes[p] * (lobe_scale * path_weight);
             if (isfinite(lobe) && max_component(abs(lobe)) < fixed_sum_max_sample)
               add_fixed(sums[3 + p], lobe);
           }
-          if (aov.hit) add_fixed(sums[7], vec3f{aov.depth, aov.hair ? 1.0f : 0.0f, 1.0f});
+          if (aov.hit)
+            add_fixed(sums[7], vec3f{aov.depth, aov.hair ? 1.0f : 0.0f, 1.0f} * path_weight);
         };
         if (!isfinite(radiance)) {
           nonfinite++;
@@ -744,14 +873,16 @@ static void trace_rows(trace_state& state, const scene_data& scene, const scene_
         // The energies only serve the clamped share: summed when clamping.
         if (params.clamp > 0) {
           auto sample_energy = (double)radiance.x + radiance.y + radiance.z;
-          energy += sample_energy;
+          energy += sample_energy * path_weight;
           if (max_component(radiance) > params.clamp) {
             lobe_scale = params.clamp / max_component(radiance);
             radiance *= lobe_scale;
             clamped++;
-            clamped_energy += sample_energy - ((double)radiance.x + radiance.y + radiance.z);
+            clamped_energy += (sample_energy - ((double)radiance.x + radiance.y + radiance.z)) *
+                              path_weight;
           }
         }
+        radiance *= path_weight;
         // Beyond what the exact sum holds (1e29): as good as infinite.
         if (max_component(abs(radiance)) >= fixed_sum_max_sample) {
           nonfinite++;
@@ -775,12 +906,14 @@ static void trace_rows(trace_state& state, const scene_data& scene, const scene_
 }
 
 // The render's roulette threshold: the parameter's, or the pilot's (once).
+// And the adaptive rates (once, after the threshold their pilot uses).
 static void init_roulette_threshold(trace_state& state, const scene_data& scene,
     const scene_bvh& bvh, const trace_context& context, const trace_params& params) {
   if (state.roulette_threshold > 0) return;
   state.roulette_threshold = params.roulette_threshold > 0
                                  ? params.roulette_threshold
                                  : estimate_roulette_threshold(scene, bvh, context, params);
+  state.rates = estimate_sample_rates(scene, bvh, context, params, state.roulette_threshold);
 }
 
 void trace_samples(trace_state& state, const scene_data& scene, const scene_bvh& bvh,
@@ -807,8 +940,32 @@ texture_data get_image(int width, int height, const std::vector<fixed_sum3>& sum
     image.pixels[i] = vec3f(fixed_to_double(sums[i]) * scale);
   return image;
 }
+// What a pixel's sums are multiplied by for the mean of its paths: 1 / n for
+// n samples, unless the pixel takes one path every q samples (weighing q),
+// and n is not a multiple of q: then 1 / (q t) for the t paths taken among
+// samples first ... first + n - 1.
+static double pixel_scale(const trace_state& state, size_t pixel) {
+  if (state.samples <= 0) return 0;
+  auto rate = state.rates.empty() ? 1.0f : state.rates[pixel];
+  if (rate >= 1) return 1.0 / state.samples;
+  auto q     = (int64_t)std::lround(1 / rate);
+  auto first = (int64_t)state.first, end = first + state.samples;
+  auto paths = (end + q - 1) / q - (first + q - 1) / q;
+  return paths > 0 ? 1.0 / (double)(q * paths) : 0.0;
+}
+
 texture_data get_image(const trace_state& state) {
-  return get_image(state.width, state.height, state.sums, state.samples);
+  if (state.rates.empty()) return get_image(state.width, state.height, state.sums, state.samples);
+  auto image = texture_data{state.width, state.height, {}};
+  image.pixels.resize(state.sums.size());
+  for (size_t i = 0; i < state.sums.size(); i++)
+    image.pixels[i] = vec3f(fixed_to_double(state.sums[i]) * pixel_scale(state, i));
+  return image;
+}
+
+std::vector<image_layer> get_aov_layers(const trace_state& state) {
+  return get_aov_layers_scaled(state.width, state.height, state.aov_sums,
+      [&state](size_t i) { return pixel_scale(state, i); });
 }
 
 }  // namespace yocto

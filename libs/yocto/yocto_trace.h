@@ -63,6 +63,10 @@ struct trace_params {
   float              roulette_threshold = 0;
   // Paths per camera ray, sharing its hit (splitting at the first vertex).
   int                split      = 1;
+  // Adaptive sampling: a pilot measures each pixel's variance and cost, and
+  // the pixel takes that many more or fewer paths per sample (see
+  // estimate_sample_rates); off: every pixel one path per sample.
+  bool               adaptive   = false;
   // Sky samples that would add less than this times the sky's average
   // radiance play a roulette for their shadow ray (0 for none).
   float              shadow_threshold = 0.1f;
@@ -135,6 +139,10 @@ struct trace_state {
   std::vector<double>        row_energy     = {};
   std::vector<double>        row_clamped    = {};
   float                      roulette_threshold = 0;  // the render's, 0 until set
+  // Paths per sample of each pixel with params.adaptive (empty until set, and
+  // without it): an integer m >= 1 (m paths, each weighing 1 / m), or 1 / q
+  // for q a power of two (one path every q samples, weighing q).
+  std::vector<float>         rates   = {};
 };
 
 // The fraction of the samples' energy that clamping removed so far.
@@ -145,7 +153,8 @@ bool check_trace_params(const scene_data& scene, const trace_params& params,
     std::string& error);
 
 // Bytes of the image buffers a render allocates: the sums of trace_state, the
-// image get_image returns and the 8-bit copy a png or jpg save makes. Callers
+// image get_image returns and the 8-bit copy a png or jpg save makes (and
+// the rates of adaptive sampling and their pilot's buffers). Callers
 // check it against their memory budget before init_trace_state.
 double trace_image_bytes(const scene_data& scene, const trace_params& params);
 
@@ -157,6 +166,20 @@ double trace_image_bytes(const scene_data& scene, const trace_params& params);
 float estimate_roulette_threshold(const scene_data& scene, const scene_bvh& bvh,
     const trace_context& context, const trace_params& params);
 
+// Paths per sample of every pixel for params.adaptive, proportional to the
+// pixel's standard deviation over the square root of its cost (the
+// allocation that minimises the image's mean squared error for a given
+// cost), scaled so that the render costs what it would cost without, and
+// rounded to integers from 1 to 16 or to 1 / q for q = 2, 4, 8 dividing
+// params.samples (so that every pixel takes a whole number of paths). The
+// variances and costs come from a pilot of 2 paths a pixel with numbers of
+// their own (the image stays unbiased: no path of the pilot is in it),
+// averaged over 7 x 7 pixels. A pure function of the scene, the parameters,
+// the threshold and the seed, as the roulette's pilot. Empty without
+// params.adaptive.
+std::vector<float> estimate_sample_rates(const scene_data& scene, const scene_bvh& bvh,
+    const trace_context& context, const trace_params& params, float roulette_threshold);
+
 // Empty sums for the camera's image; the samples will start at `first`.
 void init_trace_state(trace_state& state, const scene_data& scene, const trace_params& params,
     int first = 0);
@@ -167,7 +190,9 @@ void init_trace_state(trace_state& state, const scene_data& scene, const trace_p
 void trace_samples(trace_state& state, const scene_data& scene, const scene_bvh& bvh,
     const trace_context& context, const trace_params& params, int count);
 
-// The current estimate: sums over samples.
+// The current estimate: sums over samples (with adaptive rates, over the
+// paths each pixel has taken so far, so that any number of samples gives an
+// unbiased image).
 texture_data get_image(const trace_state& state);
 // The same for sums of `samples` samples a pixel (what a merge of parts has).
 texture_data get_image(int width, int height, const std::vector<fixed_sum3>& sums,
@@ -210,6 +235,8 @@ double trace_aov_bytes(const scene_data& scene, const trace_params& params);
 // hair_TT, hair_TRT, hair_TRRT (R, G, B), depth (Z), coverage (Y).
 std::vector<image_layer> get_aov_layers(int width, int height,
     const std::vector<fixed_sum3>& aov_sums, int samples);
+// The same for a render's state (normalised as get_image(state)).
+std::vector<image_layer> get_aov_layers(const trace_state& state);
 
 // Radiance of one path from a camera ray (exposed for tests); an automatic
 // roulette threshold (0) is taken as 1 here, as no pilot runs.

@@ -610,4 +610,9 @@ hair_sample sample_hair_scattering_weight(
   return sample_hair_lobes(brdf, outgoing, demux_hair_numbers(rn));
 }
 
+hair_sample sample_hair_scattering_weight(
+    const hair_brdf& brdf, const vec3f& outgoing, const vec4f& rn) {
+  return sample_hair_lobes(brdf, outgoing, rn);
+}
+
 }  // namespace yocto

@@ -187,6 +187,9 @@ struct hair_sample {
 // (no multiple importance sampling against a light).
 hair_sample sample_hair_scattering_weight(
     const hair_brdf& brdf, const vec3f& outgoing, const vec2f& rn);
+// The same from four independent uniform numbers (as sample_hair_scattering).
+hair_sample sample_hair_scattering_weight(
+    const hair_brdf& brdf, const vec3f& outgoing, const vec4f& rn);
 
 // Solid-angle pdf of sample_hair_scattering.
 float sample_hair_scattering_pdf(
