@@ -543,7 +543,7 @@ CLI::App* add_render_command(CLI::App& app, render_command& command, std::string
           "paths whose throughput falls below this play Russian roulette");
   render->add_flag("--adaptive", params.adaptive,
       "adaptive sampling: a pilot gives each pixel more or fewer paths a sample by its "
-      "variance and cost, at the cost of uniform sampling (unbiased)");
+      "variance and cost, at the rays of uniform sampling (unbiased)");
   render->add_option("--split", params.split,
           "paths per camera ray, sharing its first hit");
   render->add_option("--shadow-threshold", params.shadow_threshold,

@@ -56,6 +56,7 @@ VARIANTS = [
     ("after-whole-curves", "after", ["--curve-pieces", "1"]),
     ("after-shadow-0", "after", ["--shadow-threshold", "0"]),
     ("after-split-2", "after", ["--split", "2"]),
+    ("after-adaptive", "after", ["--adaptive"]),
     ("after-four-sobol", "after", ["--hair-four-numbers"]),
     ("after-four-independent", "after", ["--hair-four-numbers", "--sequence", "independent"]),
 ]
@@ -71,6 +72,7 @@ LEVERS = [
     ("bent curves in exact pieces", "after-whole-curves"),
     ("shadow-ray roulette", "after-shadow-0"),
     ("no splitting at the first hit (against 2 paths per camera ray)", "after-split-2"),
+    ("no adaptive sampling (against --adaptive: below 1, adaptive pays)", "after-adaptive"),
 ]
 CHECKPOINTS = [16, 64, 256]
 
