@@ -187,6 +187,28 @@ static scene_data make_small_hair_scene() {
   return scene;
 }
 
+// The exact sums of the parts of a render, added: each part is the sample
+// numbers at which it starts, calls trace_samples again and ends (threads
+// alternating 1 and 2); each part finds the whole render's roulette
+// threshold and adaptive rates.
+static std::vector<fixed_sum3> add_up_parts(const scene_data& scene, const scene_bvh& bvh,
+    const trace_context& context, trace_params params,
+    const std::vector<std::vector<int>>& parts, const trace_state& whole) {
+  auto added = std::vector<fixed_sum3>(whole.sums.size());
+  for (auto& part : parts) {
+    auto state = trace_state{};
+    init_trace_state(state, scene, params, part.front());
+    for (size_t k = 0; k + 1 < part.size(); k++) {
+      params.threads = 1 + (part.front() + (int)k) % 2;
+      trace_samples(state, scene, bvh, context, params, part[k + 1] - part[k]);
+    }
+    EXPECT_EQ(state.roulette_threshold, whole.roulette_threshold) << part.front();
+    EXPECT_TRUE(state.rates == whole.rates) << part.front();
+    for (size_t i = 0; i < added.size(); i++) add_fixed(added[i], state.sums[i]);
+  }
+  return added;
+}
+
 // With first-hit splitting (3 paths a camera ray) and the automatic roulette
 // threshold, 11 samples rendered at once (2 threads) equal, bit for bit, the
 // exact sums of three uneven parts 0:3, 3:7 (in two calls) and 7:11 (1 and 2
@@ -210,18 +232,7 @@ TEST(merge, split_renders_of_ranges_add_up_to_one_render) {
   trace_samples(whole, scene, bvh, context, params, params.samples);
   EXPECT_EQ(whole.nonfinite, 0);
   EXPECT_GT(whole.roulette_threshold, 0.0f);
-  auto added = std::vector<fixed_sum3>(whole.sums.size());
-  auto parts = std::vector<std::vector<int>>{{0, 3}, {3, 4, 7}, {7, 11}};
-  for (auto& part : parts) {
-    auto state = trace_state{};
-    init_trace_state(state, scene, params, part.front());
-    for (size_t k = 0; k + 1 < part.size(); k++) {
-      params.threads = 1 + (part.front() + (int)k) % 2;
-      trace_samples(state, scene, bvh, context, params, part[k + 1] - part[k]);
-    }
-    EXPECT_EQ(state.roulette_threshold, whole.roulette_threshold) << part.front();
-    for (size_t i = 0; i < added.size(); i++) add_fixed(added[i], state.sums[i]);
-  }
+  auto added = add_up_parts(scene, bvh, context, params, {{0, 3}, {3, 4, 7}, {7, 11}}, whole);
   EXPECT_TRUE(added == whole.sums);
   params.split = 1;
   auto unsplit = trace_state{};
@@ -251,18 +262,7 @@ TEST(merge, adaptive_renders_of_ranges_add_up_to_one_render) {
   init_trace_state(whole, scene, params);
   trace_samples(whole, scene, bvh, context, params, params.samples);
   ASSERT_FALSE(whole.rates.empty());
-  auto added = std::vector<fixed_sum3>(whole.sums.size());
-  auto parts = std::vector<std::vector<int>>{{0, 3}, {3, 5, 9}, {9, 16}};
-  for (auto& part : parts) {
-    auto state = trace_state{};
-    init_trace_state(state, scene, params, part.front());
-    for (size_t k = 0; k + 1 < part.size(); k++) {
-      params.threads = 1 + (part.front() + (int)k) % 2;
-      trace_samples(state, scene, bvh, context, params, part[k + 1] - part[k]);
-    }
-    EXPECT_TRUE(state.rates == whole.rates) << part.front();
-    for (size_t i = 0; i < added.size(); i++) add_fixed(added[i], state.sums[i]);
-  }
+  auto added = add_up_parts(scene, bvh, context, params, {{0, 3}, {3, 5, 9}, {9, 16}}, whole);
   EXPECT_TRUE(added == whole.sums);
   EXPECT_TRUE(get_image(whole).pixels ==
               get_image(whole.width, whole.height, added, params.samples).pixels);

@@ -27,19 +27,22 @@ struct test_render {
   int64_t                 nonfinite = 0;
   std::vector<fixed_sum3> sums      = {};
   float                   roulette_threshold = 0;  // the one the render used
+  std::vector<float>      rates     = {};           // adaptive rates (empty: uniform)
 };
 
-static test_render render_scene(const scene_data& scene, const trace_params& params) {
+// Renders samples first ... first + count - 1 (count < 0: params.samples).
+static test_render render_scene(const scene_data& scene, const trace_params& params,
+    int first = 0, int count = -1) {
   auto bvh   = scene_bvh{};
   auto error = std::string{};
   EXPECT_TRUE(make_scene_bvh(bvh, scene, {}, error)) << error;
   EXPECT_TRUE(check_trace_params(scene, params, error)) << error;
   auto context = make_trace_context(scene, params);
   auto state   = trace_state{};
-  init_trace_state(state, scene, params);
-  trace_samples(state, scene, bvh, context, params, params.samples);
+  init_trace_state(state, scene, params, first);
+  trace_samples(state, scene, bvh, context, params, count < 0 ? params.samples : count);
   return {get_image(state), state.rays.load(), state.nonfinite.load(), state.sums,
-      state.roulette_threshold};
+      state.roulette_threshold, state.rates};
 }
 
 static double image_mean(const texture_data& image) {
@@ -683,27 +686,6 @@ TEST(trace, automatic_roulette_and_split_renders_do_not_depend_on_threads) {
 // ADAPTIVE SAMPLING
 // -----------------------------------------------------------------------------
 
-// A render with its adaptive rates and sums.
-struct rates_render {
-  texture_data            image     = {};
-  int64_t                 rays      = 0;
-  int64_t                 nonfinite = 0;
-  std::vector<fixed_sum3> sums      = {};
-  std::vector<float>      rates     = {};
-};
-static rates_render render_state(const scene_data& scene, const trace_params& params,
-    int first = 0, int count = -1) {
-  auto bvh   = scene_bvh{};
-  auto error = std::string{};
-  EXPECT_TRUE(make_scene_bvh(bvh, scene, {}, error)) << error;
-  EXPECT_TRUE(check_trace_params(scene, params, error)) << error;
-  auto context = make_trace_context(scene, params);
-  auto state   = trace_state{};
-  init_trace_state(state, scene, params, first);
-  trace_samples(state, scene, bvh, context, params, count < 0 ? params.samples : count);
-  return {get_image(state), state.rays.load(), state.nonfinite.load(), state.sums, state.rates};
-}
-
 static double image_mse(const texture_data& image, const texture_data& reference) {
   auto sum = 0.0;
   for (size_t i = 0; i < image.pixels.size(); i++) {
@@ -727,9 +709,9 @@ TEST(trace, adaptive_sampling_keeps_the_mean_and_spends_where_the_noise_is) {
   params.samples    = 128;
   params.seed       = 23;
   params.roulette_threshold = 0.5f;
-  auto uniform_state = render_state(scene, params);
+  auto uniform_state = render_scene(scene, params);
   params.adaptive    = true;
-  auto adaptive_state = render_state(scene, params);
+  auto adaptive_state = render_scene(scene, params);
   EXPECT_TRUE(uniform_state.rates.empty());
   ASSERT_EQ(adaptive_state.rates.size(), uniform_state.sums.size());
   auto fewer = 0, more = 0;
@@ -743,11 +725,8 @@ TEST(trace, adaptive_sampling_keeps_the_mean_and_spends_where_the_noise_is) {
       adaptive_state.rates.size());
   EXPECT_GT(fewer, 0);
   EXPECT_GT(more, 0);
-  auto uniform  = test_render{uniform_state.image, uniform_state.rays, uniform_state.nonfinite};
-  auto adaptive = test_render{
-      adaptive_state.image, adaptive_state.rays, adaptive_state.nonfinite};
-  expect_same_mean(adaptive, uniform, "adaptive against uniform");
-  EXPECT_LT((double)adaptive.rays, 1.05 * (double)uniform.rays);
+  expect_same_mean(adaptive_state, uniform_state, "adaptive against uniform");
+  EXPECT_LT((double)adaptive_state.rays, 1.05 * (double)uniform_state.rays);
 }
 
 TEST(trace, adaptive_sampling_lowers_the_error_for_its_rays) {
@@ -760,16 +739,16 @@ TEST(trace, adaptive_sampling_lowers_the_error_for_its_rays) {
   params.samples    = 2048;
   params.seed       = 1000;
   params.roulette_threshold = 0.5f;
-  auto reference    = render_state(scene, params).image;
+  auto reference    = render_scene(scene, params).image;
   params.samples    = 64;
   auto uniform = 0.0, adaptive = 0.0;
   for (auto seed : {1, 2, 3}) {
     params.seed     = (uint64_t)seed;
     params.adaptive = false;
-    auto one        = render_state(scene, params);
+    auto one        = render_scene(scene, params);
     uniform += image_mse(one.image, reference) * (double)one.rays;
     params.adaptive = true;
-    auto other      = render_state(scene, params);
+    auto other      = render_scene(scene, params);
     adaptive += image_mse(other.image, reference) * (double)other.rays;
   }
   std::printf("[ figure ] MSE x rays: uniform %g adaptive %g (%.2fx)\n", uniform, adaptive,
@@ -792,7 +771,7 @@ TEST(trace, adaptive_images_are_unbiased_at_any_sample_count) {
     params.samples    = samples;
     params.adaptive   = true;
     for (auto count : {1, 3, samples}) {
-      auto state = render_state(sky, params, 0, count);
+      auto state = render_scene(sky, params, 0, count);
       ASSERT_EQ(state.rates.size(), (size_t)256);
       for (auto rate : state.rates) EXPECT_EQ(rate, 1.0f / every) << samples;
       for (auto& pixel : state.image.pixels) {
@@ -811,9 +790,9 @@ TEST(trace, adaptive_renders_do_not_depend_on_threads) {
   params.samples    = 16;
   params.adaptive   = true;
   params.threads    = 1;
-  auto one          = render_state(make_hair_test_scene(), params);
+  auto one          = render_scene(make_hair_test_scene(), params);
   params.threads    = 2;
-  auto two          = render_state(make_hair_test_scene(), params);
+  auto two          = render_scene(make_hair_test_scene(), params);
   EXPECT_FALSE(one.rates.empty());
   EXPECT_TRUE(one.rates == two.rates);
   EXPECT_TRUE(one.sums == two.sums);

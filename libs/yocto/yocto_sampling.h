@@ -208,18 +208,17 @@ inline vec2f sample_sobol2f(uint32_t index, uint64_t seed) {
 // numbers are jointly stratified (a (3,4)-sequence; dimensions 0 and 1 a
 // (0,2)-sequence), where two pairs of sample_sobol2f are stratified each on
 // its own.
+// Dimensions 0 and 1 are sample_sobol2f's point for the same index and seed
+// (the same shuffle and scrambles); 2 and 3 take scrambles of their own.
 inline vec4f sample_sobol4f(uint32_t index, uint64_t seed) {
-  auto hash     = hash_uint64(seed);
-  auto more     = hash_uint64(hash);
-  auto shuffled = nested_uniform_scramble(index, (uint32_t)hash);
-  auto x = reverse_bits(laine_karras_permutation(shuffled, (uint32_t)(hash >> 32)));
-  auto y = reverse_bits(
-      laine_karras_permutation(sobol_dimension1_reversed(shuffled), (uint32_t)more));
+  auto xy       = sample_sobol2f(index, seed);
+  auto more     = hash_uint64(hash_uint64(seed));
+  auto shuffled = nested_uniform_scramble(index, (uint32_t)hash_uint64(seed));
   auto z = reverse_bits(laine_karras_permutation(
       sobol_reversed(sobol_dimension2_tables, shuffled), (uint32_t)(more >> 32)));
   auto w = reverse_bits(laine_karras_permutation(
       sobol_reversed(sobol_dimension3_tables, shuffled), (uint32_t)hash_uint64(more)));
-  return {fixed_to_float(x), fixed_to_float(y), fixed_to_float(z), fixed_to_float(w)};
+  return {xy.x, xy.y, fixed_to_float(z), fixed_to_float(w)};
 }
 
 }  // namespace yocto
