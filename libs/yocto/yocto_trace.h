@@ -19,7 +19,9 @@
 // the parameters and the seed, so every part of a split render finds the same
 // threshold. Where no MIS weight needs a BSDF pdf (no light to sample), a
 // sampled hair direction takes its lobe's own weight A_p / P(p), and the
-// lobes are not evaluated.
+// lobes are not evaluated. With params.adaptive, a second pilot gives each
+// pixel more or fewer paths a sample by its variance and cost (see
+// estimate_sample_rates), a pure function of the same inputs.
 //
 
 #ifndef YOCTO_TRACE_H_
