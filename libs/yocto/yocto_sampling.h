@@ -93,46 +93,14 @@ inline constexpr uint32_t reverse_bits(uint32_t x) {
 // itself shifted right). Together a (0,2)-sequence in base 2.
 // Dimension 1 is generated bit-reversed, as the scrambles below use it.
 inline uint32_t sobol_dimension0(uint32_t index) { return reverse_bits(index); }
-// The xor of the direction numbers of each byte of the index, one table per
-// byte position (4 KB), so that a point costs four lookups instead of a loop
-// over the index's 32 bits.
-inline constexpr std::array<std::array<uint32_t, 256>, 4> make_sobol_dimension1_tables() {
-  auto tables    = std::array<std::array<uint32_t, 256>, 4>{};
-  auto direction = 1u;
-  for (auto byte = 0; byte < 4; byte++) {
-    auto directions = std::array<uint32_t, 8>{};
-    for (auto bit = 0; bit < 8; bit++, direction ^= direction << 1) directions[bit] = direction;
-    for (auto value = 0; value < 256; value++) {
-      auto result = 0u;
-      for (auto bit = 0; bit < 8; bit++)
-        if (value >> bit & 1) result ^= directions[bit];
-      tables[byte][value] = result;
-    }
-  }
-  return tables;
-}
-inline constexpr auto sobol_dimension1_tables = make_sobol_dimension1_tables();
-inline uint32_t sobol_dimension1_reversed(uint32_t index) {
-  auto& tables = sobol_dimension1_tables;
-  return tables[0][index & 0xff] ^ tables[1][index >> 8 & 0xff] ^
-         tables[2][index >> 16 & 0xff] ^ tables[3][index >> 24];
-}
-inline uint32_t sobol_dimension1(uint32_t index) {
-  return reverse_bits(sobol_dimension1_reversed(index));
-}
-
-// A hash in which every bit is changed only as a function of the bits below
-// it (additions and products carry upwards only), so that on bit-reversed
-// numbers it is an Owen scramble (Laine and Karras, Stratified Sampling for
-// Stochastic Transparency, 2011). The constants are Vegdahl's (Building a
-// Better LK Hash, 2021): Burley's listing 2 lets the seed in by one addition
-// only, so the top d digits take 2^d forms over all seeds instead of
-// 2^(2^d - 1), and sub-strata of a pixel stay correlated (test_sampling).
-// Sobol dimensions 2 and 3 by their direction numbers v_k = m_k 2^(32 - k),
-// from the primitive polynomials x^2 + x + 1 and x^3 + x + 1 and the
-// initial m of Joe and Kuo (Constructing Sobol Sequences with Better
-// Two-Dimensional Projections, 2008: 1 3, and 1 3 1), by the recurrence of
-// Bratley and Fox (1988). Bit-reversed byte tables, as dimension 1's.
+// Sobol dimensions 1, 2 and 3 by their direction numbers v_k = m_k 2^(32 - k):
+// primitive polynomials x + 1, x^2 + x + 1 and x^3 + x + 1 with the initial
+// m of Joe and Kuo (Constructing Sobol Sequences with Better Two-Dimensional
+// Projections, 2008: 1; 1 3; 1 3 1), the others by the recurrence of Bratley
+// and Fox (1988); for x + 1 it gives Pascal's triangle. Kept bit-reversed,
+// as the xor of the directions of each byte of the index, one table per byte
+// position (4 KB), so that a point costs four lookups instead of a loop over
+// the index's 32 bits.
 inline constexpr std::array<std::array<uint32_t, 256>, 4> make_sobol_tables(
     int degree, uint32_t coefficients, std::array<uint32_t, 3> initial) {
   auto m = std::array<uint32_t, 33>{};
@@ -159,14 +127,26 @@ inline constexpr std::array<std::array<uint32_t, 256>, 4> make_sobol_tables(
   }
   return tables;
 }
+inline constexpr auto sobol_dimension1_tables = make_sobol_tables(1, 0, {1, 0, 0});
 inline constexpr auto sobol_dimension2_tables = make_sobol_tables(2, 1, {1, 3, 0});
 inline constexpr auto sobol_dimension3_tables = make_sobol_tables(3, 1, {1, 3, 1});
+// Point `index` of a dimension, bit-reversed.
 inline uint32_t sobol_reversed(
     const std::array<std::array<uint32_t, 256>, 4>& tables, uint32_t index) {
   return tables[0][index & 0xff] ^ tables[1][index >> 8 & 0xff] ^
          tables[2][index >> 16 & 0xff] ^ tables[3][index >> 24];
 }
+inline uint32_t sobol_dimension1(uint32_t index) {
+  return reverse_bits(sobol_reversed(sobol_dimension1_tables, index));
+}
 
+// A hash in which every bit is changed only as a function of the bits below
+// it (additions and products carry upwards only), so that on bit-reversed
+// numbers it is an Owen scramble (Laine and Karras, Stratified Sampling for
+// Stochastic Transparency, 2011). The constants are Vegdahl's (Building a
+// Better LK Hash, 2021): Burley's listing 2 lets the seed in by one addition
+// only, so the top d digits take 2^d forms over all seeds instead of
+// 2^(2^d - 1), and sub-strata of a pixel stay correlated (test_sampling).
 inline uint32_t laine_karras_permutation(uint32_t x, uint32_t seed) {
   x ^= x * 0x3d20adeau;
   x += seed;
@@ -186,6 +166,18 @@ inline uint32_t nested_uniform_scramble(uint32_t x, uint32_t seed) {
 // A 0.32 fixed-point number to a float in [0, 1) (its top 24 bits).
 inline float fixed_to_float(uint32_t x) { return (x >> 8) * (1.0f / 16777216.0f); }
 
+// The shuffled index and the two hashes whose halves seed the scrambles of
+// point `index` of sequence `seed` (sample_sobol2f, sample_sobol4f).
+struct sobol_scrambles {
+  uint32_t shuffled = 0;
+  uint64_t hash     = 0;
+  uint64_t more     = 0;
+};
+inline sobol_scrambles make_sobol_scrambles(uint32_t index, uint64_t seed) {
+  auto hash = hash_uint64(seed);
+  return {nested_uniform_scramble(index, (uint32_t)hash), hash, hash_uint64(hash)};
+}
+
 // Point `index` of a shuffled, Owen-scrambled 2D Sobol sequence (Burley
 // 2020, section 4): the same seed gives one (0,2)-sequence, other seeds
 // independent ones, so that every pair of dimensions of a path is
@@ -194,14 +186,14 @@ inline float fixed_to_float(uint32_t x) { return (x >> 8) * (1.0f / 16777216.0f)
 // index itself: reverse_bits(laine_karras_permutation(shuffled, seed)) is
 // nested_uniform_scramble(sobol_dimension0(shuffled), seed) with two
 // reversals less (and likewise for dimension 1).
-inline vec2f sample_sobol2f(uint32_t index, uint64_t seed) {
-  auto hash     = hash_uint64(seed);
-  auto more     = hash_uint64(hash);
-  auto shuffled = nested_uniform_scramble(index, (uint32_t)hash);
-  auto x = reverse_bits(laine_karras_permutation(shuffled, (uint32_t)(hash >> 32)));
-  auto y = reverse_bits(
-      laine_karras_permutation(sobol_dimension1_reversed(shuffled), (uint32_t)more));
+inline vec2f sample_sobol2f(const sobol_scrambles& point) {
+  auto x = reverse_bits(laine_karras_permutation(point.shuffled, (uint32_t)(point.hash >> 32)));
+  auto y = reverse_bits(laine_karras_permutation(
+      sobol_reversed(sobol_dimension1_tables, point.shuffled), (uint32_t)point.more));
   return {fixed_to_float(x), fixed_to_float(y)};
+}
+inline vec2f sample_sobol2f(uint32_t index, uint64_t seed) {
+  return sample_sobol2f(make_sobol_scrambles(index, seed));
 }
 
 // Point `index` of a shuffled, Owen-scrambled 4D Sobol sequence: the four
@@ -209,15 +201,15 @@ inline vec2f sample_sobol2f(uint32_t index, uint64_t seed) {
 // (0,2)-sequence), where two pairs of sample_sobol2f are stratified each on
 // its own.
 // Dimensions 0 and 1 are sample_sobol2f's point for the same index and seed
-// (the same shuffle and scrambles); 2 and 3 take scrambles of their own.
+// (the same shuffle and scrambles); 2 and 3 are scrambled by the upper half
+// of `more` and by a hash of it.
 inline vec4f sample_sobol4f(uint32_t index, uint64_t seed) {
-  auto xy       = sample_sobol2f(index, seed);
-  auto more     = hash_uint64(hash_uint64(seed));
-  auto shuffled = nested_uniform_scramble(index, (uint32_t)hash_uint64(seed));
-  auto z = reverse_bits(laine_karras_permutation(
-      sobol_reversed(sobol_dimension2_tables, shuffled), (uint32_t)(more >> 32)));
-  auto w = reverse_bits(laine_karras_permutation(
-      sobol_reversed(sobol_dimension3_tables, shuffled), (uint32_t)hash_uint64(more)));
+  auto point = make_sobol_scrambles(index, seed);
+  auto xy    = sample_sobol2f(point);
+  auto z     = reverse_bits(laine_karras_permutation(
+      sobol_reversed(sobol_dimension2_tables, point.shuffled), (uint32_t)(point.more >> 32)));
+  auto w     = reverse_bits(laine_karras_permutation(
+      sobol_reversed(sobol_dimension3_tables, point.shuffled), (uint32_t)hash_uint64(point.more)));
   return {xy.x, xy.y, fixed_to_float(z), fixed_to_float(w)};
 }
 

@@ -812,6 +812,18 @@ std::vector<float> estimate_sample_rates(const scene_data& scene, const scene_bv
   return rates;
 }
 
+// A pixel's adaptive rate (trace_state::rates) as m paths every sample or
+// one path every q samples; {1, 1} without rates.
+struct trace_pixel_paths {
+  int paths = 1;
+  int every = 1;
+};
+static trace_pixel_paths get_pixel_paths(const trace_state& state, size_t pixel) {
+  auto rate = state.rates.empty() ? 1.0f : state.rates[pixel];
+  if (rate >= 1) return {(int)rate, 1};
+  return {1, (int)std::lround(1 / rate)};
+}
+
 // Adds `count` samples to every pixel of the image rows; with `records`, the
 // rays of row j go to (*records)[j].
 static void trace_rows(trace_state& state, const scene_data& scene, const scene_bvh& bvh,
@@ -830,10 +842,8 @@ static void trace_rows(trace_state& state, const scene_data& scene, const scene_
       // Adaptive rates: m paths a sample (numbers s m ... s m + m - 1), each
       // weighing 1 / m, or one path every q samples (numbers s / q) weighing
       // q; the paths of any range of samples are a pure function of it.
-      auto rate  = state.rates.empty() ? 1.0f : state.rates[pixel];
-      auto paths = rate >= 1 ? (int)rate : 1;
-      auto every = rate >= 1 ? 1 : (int)std::lround(1 / rate);
-      auto path_weight = rate >= 1 ? 1.0f / (float)paths : (float)every;
+      auto [paths, every] = get_pixel_paths(state, pixel);
+      auto path_weight    = (float)every / (float)paths;
       for (auto n = (int64_t)next * paths; n < (int64_t)(next + count) * paths; n++) {
         if (n % every != 0) continue;
         auto s        = (uint32_t)(n / every);
@@ -946,9 +956,8 @@ texture_data get_image(int width, int height, const std::vector<fixed_sum3>& sum
 // samples first ... first + n - 1.
 static double pixel_scale(const trace_state& state, size_t pixel) {
   if (state.samples <= 0) return 0;
-  auto rate = state.rates.empty() ? 1.0f : state.rates[pixel];
-  if (rate >= 1) return 1.0 / state.samples;
-  auto q     = (int64_t)std::lround(1 / rate);
+  auto q = (int64_t)get_pixel_paths(state, pixel).every;
+  if (q == 1) return 1.0 / state.samples;
   auto first = (int64_t)state.first, end = first + state.samples;
   auto paths = (end + q - 1) / q - (first + q - 1) / q;
   return paths > 0 ? 1.0 / (double)(q * paths) : 0.0;
