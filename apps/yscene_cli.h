@@ -107,7 +107,7 @@ struct render_command {
   yocto::trace_params params   = {};
   std::string         sampler  = "path";
   std::string         lights   = "automatic";
-  std::string         sequence = "sobol";
+  std::string         sequence = "global-sobol";
 };
 
 CLI::App* add_render_command(CLI::App& app, render_command& command, std::string& max_memory);

@@ -531,7 +531,9 @@ CLI::App* add_render_command(CLI::App& app, render_command& command, std::string
           "lights sampled by path: automatic (those BSDF sampling does not find as well) or all")
       ->check(CLI::IsMember(trace_lights_names));
   render->add_option("--sequence", sequence,
-          "random numbers of a pixel: sobol (Owen-scrambled) or independent")
+          "random numbers of a pixel: global-sobol (one Owen-scrambled Sobol point across "
+          "32 dimensions, the default), sobol (Owen-scrambled Sobol pairs, each shuffled) or "
+          "independent")
       ->check(CLI::IsMember(sequence_names));
   render->add_option("--sobol-bounces", params.sobol_bounces,
           "bounces drawing Sobol numbers (independent numbers after them)")
@@ -558,8 +560,8 @@ CLI::App* add_render_command(CLI::App& app, render_command& command, std::string
   render->add_option("--exposure,-e", options.exposure, "exposure for png/jpg (stops)");
   render->add_option("--camera", options.camera, "camera name");
   render->add_flag("--flat-curves", options.flat_curves, "ray-facing flat fibers");
-  render->add_flag("--hair-four-numbers", params.hair_sampling.four_numbers,
-      "sample hair with four random numbers instead of demuxing two");
+  render->add_flag("--hair-four-numbers,!--hair-demux", params.hair_sampling.four_numbers,
+      "sample hair with four random numbers (the default), or with two demuxed into four");
   render->add_flag("--quiet,-q", options.quiet,
       "print nothing on success (no progress, no summary; errors and warnings still go to "
       "stderr, --stats and --checkpoints lines to stdout)");

@@ -101,8 +101,18 @@ inline uint32_t sobol_dimension0(uint32_t index) { return reverse_bits(index); }
 // as the xor of the directions of each byte of the index, one table per byte
 // position (4 KB), so that a point costs four lookups instead of a loop over
 // the index's 32 bits.
-inline constexpr std::array<std::array<uint32_t, 256>, 4> make_sobol_tables(
-    int degree, uint32_t coefficients, std::array<uint32_t, 3> initial) {
+// A dimension's primitive polynomial (its degree and inner coefficients, as
+// Joe and Kuo write them) and initial m.
+struct sobol_polynomial {
+  int                     degree       = 0;
+  uint32_t                coefficients = 0;
+  std::array<uint32_t, 8> initial      = {};
+};
+// The direction numbers v_1 ... v_32 of a dimension, each bit-reversed (the
+// xor of those of an index's bits is the point, bit-reversed).
+inline constexpr std::array<uint32_t, 32> make_sobol_directions(
+    const sobol_polynomial& polynomial) {
+  auto [degree, coefficients, initial] = polynomial;
   auto m = std::array<uint32_t, 33>{};
   for (auto k = 1; k <= 32; k++) {
     if (k <= degree) {
@@ -114,22 +124,28 @@ inline constexpr std::array<std::array<uint32_t, 256>, 4> make_sobol_tables(
       if (coefficients >> (degree - 1 - j) & 1) m[k] ^= m[k - j] << j;
     }
   }
-  auto tables = std::array<std::array<uint32_t, 256>, 4>{};
+  auto directions = std::array<uint32_t, 32>{};
+  for (auto k = 1; k <= 32; k++) directions[k - 1] = reverse_bits(m[k] << (32 - k));
+  return directions;
+}
+inline constexpr std::array<std::array<uint32_t, 256>, 4> make_sobol_tables(
+    const sobol_polynomial& polynomial) {
+  auto directions = make_sobol_directions(polynomial);
+  auto tables     = std::array<std::array<uint32_t, 256>, 4>{};
   for (auto byte = 0; byte < 4; byte++) {
     for (auto value = 0; value < 256; value++) {
       auto result = 0u;
       for (auto bit = 0; bit < 8; bit++) {
-        auto k = byte * 8 + bit + 1;
-        if (value >> bit & 1) result ^= reverse_bits(m[k] << (32 - k));
+        if (value >> bit & 1) result ^= directions[byte * 8 + bit];
       }
       tables[byte][value] = result;
     }
   }
   return tables;
 }
-inline constexpr auto sobol_dimension1_tables = make_sobol_tables(1, 0, {1, 0, 0});
-inline constexpr auto sobol_dimension2_tables = make_sobol_tables(2, 1, {1, 3, 0});
-inline constexpr auto sobol_dimension3_tables = make_sobol_tables(3, 1, {1, 3, 1});
+inline constexpr auto sobol_dimension1_tables = make_sobol_tables({1, 0, {1}});
+inline constexpr auto sobol_dimension2_tables = make_sobol_tables({2, 1, {1, 3}});
+inline constexpr auto sobol_dimension3_tables = make_sobol_tables({3, 1, {1, 3, 1}});
 // Point `index` of a dimension, bit-reversed.
 inline uint32_t sobol_reversed(
     const std::array<std::array<uint32_t, 256>, 4>& tables, uint32_t index) {
@@ -213,6 +229,60 @@ inline vec4f sample_sobol4f(uint32_t index, uint64_t seed) {
   return {xy.x, xy.y, fixed_to_float(z), fixed_to_float(w)};
 }
 
+// One Sobol point across many dimensions (pbrt-v4's SobolSampler, with
+// Burley's hashed Owen scrambling): the polynomials and initial m of Joe and
+// Kuo's new-joe-kuo-6.21201 for dimensions 1 ... 31 (Constructing Sobol
+// Sequences with Better Two-Dimensional Projections, 2008), chosen so that
+// the pairs of low dimensions are nets with small t.
+inline constexpr auto sobol_global_dimensions = 32;
+inline constexpr auto sobol_global_polynomials =
+    std::array<sobol_polynomial, sobol_global_dimensions - 1>{{
+        {1, 0, {1}}, {2, 1, {1, 3}}, {3, 1, {1, 3, 1}},
+        {3, 2, {1, 1, 1}}, {4, 1, {1, 1, 3, 3}}, {4, 4, {1, 3, 5, 13}},
+        {5, 2, {1, 1, 5, 5, 17}}, {5, 4, {1, 1, 5, 5, 5}}, {5, 7, {1, 1, 7, 11, 19}},
+        {5, 11, {1, 1, 5, 1, 1}}, {5, 13, {1, 1, 1, 3, 11}}, {5, 14, {1, 3, 5, 5, 31}},
+        {6, 1, {1, 3, 3, 9, 7, 49}}, {6, 13, {1, 1, 1, 15, 21, 21}},
+        {6, 16, {1, 3, 1, 13, 27, 49}}, {6, 19, {1, 1, 1, 15, 7, 5}},
+        {6, 22, {1, 3, 1, 15, 13, 25}}, {6, 25, {1, 1, 5, 5, 19, 61}},
+        {7, 1, {1, 3, 7, 11, 23, 15, 103}}, {7, 4, {1, 3, 7, 13, 13, 15, 69}},
+        {7, 7, {1, 1, 3, 13, 7, 35, 63}}, {7, 8, {1, 3, 5, 9, 1, 25, 53}},
+        {7, 14, {1, 3, 1, 13, 9, 35, 107}}, {7, 19, {1, 3, 1, 5, 27, 61, 31}},
+        {7, 21, {1, 1, 5, 11, 19, 41, 61}}, {7, 28, {1, 3, 5, 3, 3, 13, 69}},
+        {7, 31, {1, 1, 7, 13, 1, 19, 1}}, {7, 32, {1, 3, 7, 5, 13, 19, 59}},
+        {7, 37, {1, 1, 3, 9, 25, 29, 41}}, {7, 41, {1, 3, 5, 13, 23, 1, 55}},
+        {7, 42, {1, 3, 7, 3, 13, 59, 17}},
+    }};
+inline constexpr auto make_sobol_global_directions() {
+  auto directions = std::array<std::array<uint32_t, 32>, sobol_global_dimensions>{};
+  for (auto k = 0; k < 32; k++) directions[0][k] = 1u << k;  // van der Corput
+  for (auto d = 1; d < sobol_global_dimensions; d++)
+    directions[d] = make_sobol_directions(sobol_global_polynomials[d - 1]);
+  return directions;
+}
+inline constexpr auto sobol_global_directions = make_sobol_global_directions();
+
+// Dimension `dimension` of point `index`, bit-reversed: the xor of the
+// directions of the index's set bits (a pixel's few samples have few).
+inline uint32_t sobol_global_reversed(int dimension, uint32_t index) {
+  auto& directions = sobol_global_directions[dimension];
+  auto  result     = 0u;
+  for (; index != 0; index &= index - 1) result ^= directions[__builtin_ctz(index)];
+  return result;
+}
+
+// Dimensions 2 slot and 2 slot + 1 of point `index` of the Sobol sequence
+// scrambled by `key`: every dimension has its own Owen scramble, and the
+// points of all slots are one point (not shuffled), so that the projections
+// of the sequence onto pairs of dimensions across slots are nets as well.
+inline vec2f sample_sobol_global2f(uint32_t index, uint64_t key, int slot) {
+  auto hash = hash_uint64(key ^ (0x676c6f62616cULL + (uint64_t)slot));  // "global"
+  auto x    = reverse_bits(laine_karras_permutation(
+      sobol_global_reversed(2 * slot, index), (uint32_t)hash));
+  auto y    = reverse_bits(laine_karras_permutation(
+      sobol_global_reversed(2 * slot + 1, index), (uint32_t)(hash >> 32)));
+  return {fixed_to_float(x), fixed_to_float(y)};
+}
+
 }  // namespace yocto
 
 // -----------------------------------------------------------------------------
@@ -220,31 +290,38 @@ inline vec4f sample_sobol4f(uint32_t index, uint64_t seed) {
 // -----------------------------------------------------------------------------
 namespace yocto {
 
-// Scrambled Sobol pairs, or independent numbers.
-enum struct sequence_type { sobol, independent };
-inline const auto sequence_names = std::array<std::string, 2>{"sobol", "independent"};
+// Scrambled Sobol pairs (padded: each pair its own shuffled sequence), one
+// scrambled Sobol point across the pairs of `global_slots` (the others
+// padded), or independent numbers.
+enum struct sequence_type { sobol, independent, global_sobol };
+inline const auto sequence_names = std::array<std::string, 3>{
+    "sobol", "independent", "global-sobol"};
 
 // The numbers of one pixel sample. They are drawn as pairs of dimensions at
 // fixed positions (a path's bounce k uses the same pairs in every sample);
-// Sobol pairs below `sobol_pairs`, a hashed PCG stream past them.
+// Sobol pairs below `sobol_pairs`, a hashed PCG stream past them. With
+// global_sobol, pair p below `sobol_pairs` takes the dimensions of slot
+// global_slots[p] of the global point, if not negative.
 struct sequence_state {
   sequence_type type        = sequence_type::sobol;
   uint64_t      key         = 0;  // hash of seed and pixel
   uint32_t      index       = 0;  // sample index
   int           sobol_pairs = 0;
+  const int8_t* global_slots = nullptr;
   rng_state     rng         = {};
 };
 
 // The sequence of sample `sample` of pixel `pixel`: a pure function of its
 // arguments, so that any range of samples renders alone.
 inline sequence_state make_sequence(sequence_type type, uint64_t seed, int64_t pixel,
-    uint32_t sample, int sobol_pairs) {
+    uint32_t sample, int sobol_pairs, const int8_t* global_slots = nullptr) {
   auto seed_hash    = hash_uint64(seed);
   auto state        = sequence_state{};
   state.type        = type;
   state.key         = hash_uint64(seed_hash ^ (uint64_t)pixel);
   state.index       = sample;
-  state.sobol_pairs = type == sequence_type::sobol ? sobol_pairs : 0;
+  state.sobol_pairs = type != sequence_type::independent ? sobol_pairs : 0;
+  state.global_slots = type == sequence_type::global_sobol ? global_slots : nullptr;
   auto key   = seed_hash ^ hash_uint64(((uint64_t)pixel << 24) ^ (uint64_t)sample);
   state.rng  = make_rng(hash_uint64(key), (uint64_t)pixel);
   return state;
@@ -253,6 +330,8 @@ inline sequence_state make_sequence(sequence_type type, uint64_t seed, int64_t p
 // The pair of dimensions `pair` of the sample.
 inline vec2f sample_sequence2f(sequence_state& state, int pair) {
   if (pair < state.sobol_pairs) {
+    if (state.global_slots && state.global_slots[pair] >= 0)
+      return sample_sobol_global2f(state.index, state.key, state.global_slots[pair]);
     return sample_sobol2f(state.index, state.key ^ ((uint64_t)pair << 40));
   }
   return rand2f(state.rng);
@@ -261,7 +340,7 @@ inline vec2f sample_sequence2f(sequence_state& state, int pair) {
 // Pairs `pair` and `pair + 1` of the sample as four jointly stratified
 // numbers (one 4D Sobol point) where both are Sobol pairs.
 inline vec4f sample_sequence4f(sequence_state& state, int pair) {
-  if (pair + 1 < state.sobol_pairs) {
+  if (pair + 1 < state.sobol_pairs && !state.global_slots) {
     return sample_sobol4f(state.index, state.key ^ ((uint64_t)pair << 40));
   }
   auto a = sample_sequence2f(state, pair), b = sample_sequence2f(state, pair + 1);

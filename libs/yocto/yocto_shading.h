@@ -27,7 +27,10 @@ namespace yocto {
 // How the hair BSDF samples and prepares its terms (each a variant of the
 // same estimator; the defaults are the fastest).
 struct hair_sampling_params {
-  bool four_numbers   = false;  // 4 independent numbers, not 2 demuxed into 4
+  // 4 numbers (two pairs of the pixel's sequence), not 2 demuxed into 4 as
+  // in the thesis: under the global Sobol sequence the four are jointly
+  // stratified, which the demux only approximates.
+  bool four_numbers   = true;
   bool per_hit        = false;  // material terms at every hit (as the thesis)
   bool fast_pow       = false;  // beta^20, beta^22 by squaring, not std::pow
   // Weigh sampled hair directions by eval / pdf of the lobe mixture even

@@ -16,6 +16,48 @@
 // -----------------------------------------------------------------------------
 namespace yocto {
 
+// The dimensions of a pixel sample, in pairs: the pixel position and the
+// lens, then six pairs per bounce (light choice and light element, point on
+// the light, glossy lobe and roulette, BSDF direction, two more numbers for
+// hair sampled with four, and the shadow-ray roulette). Fixed positions keep
+// every bounce's numbers stratified across the samples of a pixel, whatever
+// the path did before.
+enum trace_pair {
+  trace_pair_pixel = 0, trace_pair_lens = 1,
+  trace_pair_light = 0, trace_pair_light_point = 1, trace_pair_lobe_roulette = 2,
+  trace_pair_direction = 3, trace_pair_direction_more = 4, trace_pair_shadow = 5,
+};
+static int trace_bounce_pairs(int bounce) { return 2 + 6 * bounce; }
+
+// The pairs that take the slots of the global Sobol point (global_sobol),
+// in the order a path draws them, leaving out those this render never
+// draws (the lens of a pinhole, lights where none are sampled, the roulette
+// before its first bounce, the glossy lobe where no material is glossy), so
+// that the dimensions a path uses are the lowest, best stratified ones.
+static std::vector<int8_t> make_sequence_slots(
+    const scene_data& scene, const trace_params& params, bool samples_lights) {
+  auto slots = std::vector<int8_t>((size_t)trace_bounce_pairs(params.sobol_bounces), -1);
+  auto next  = 0;
+  auto take  = [&](int pair) {
+    if (pair < (int)slots.size() && next < sobol_global_dimensions / 2)
+      slots[pair] = (int8_t)next++;
+  };
+  auto& camera = scene.cameras[std::clamp(params.camera, 0, (int)scene.cameras.size() - 1)];
+  auto glossy  = false, four_numbers = params.hair_sampling.four_numbers;
+  for (auto& material : scene.materials) glossy |= material.type == material_type::glossy;
+  take(trace_pair_pixel);
+  if (!camera.orthographic && camera.aperture > 0) take(trace_pair_lens);
+  for (auto bounce = 0; bounce < params.sobol_bounces; bounce++) {
+    auto pairs = trace_bounce_pairs(bounce);
+    if (samples_lights) take(pairs + trace_pair_light), take(pairs + trace_pair_light_point);
+    if (glossy || bounce >= params.roulette_bounce) take(pairs + trace_pair_lobe_roulette);
+    take(pairs + trace_pair_direction);
+    if (four_numbers) take(pairs + trace_pair_direction_more);
+    if (samples_lights && params.shadow_threshold > 0) take(pairs + trace_pair_shadow);
+  }
+  return slots;
+}
+
 trace_context make_trace_context(const scene_data& scene, const trace_params& params) {
   auto context    = trace_context{};
   context.shading = make_shading_context(scene, params.hair_sampling);
@@ -92,6 +134,9 @@ trace_context make_trace_context(const scene_data& scene, const trace_params& pa
     light.distant = i;
     context.lights.push_back(light);
   }
+  if (params.sequence == sequence_type::global_sobol && !scene.cameras.empty())
+    context.sequence_slots = make_sequence_slots(scene, params,
+        params.sampler == trace_sampler_type::path && !context.lights.empty());
   return context;
 }
 
@@ -230,18 +275,10 @@ static trace_light_value eval_light_sample(const scene_data& scene,
   }
 }
 
-// The dimensions of a pixel sample, in pairs: the pixel position and the
-// lens, then six pairs per bounce (light choice and light element, point on
-// the light, glossy lobe and roulette, BSDF direction, two more numbers for
-// hair sampled with four, and the shadow-ray roulette). Fixed positions keep
-// every bounce's numbers stratified across the samples of a pixel, whatever
-// the path did before.
-enum trace_pair {
-  trace_pair_pixel = 0, trace_pair_lens = 1,
-  trace_pair_light = 0, trace_pair_light_point = 1, trace_pair_lobe_roulette = 2,
-  trace_pair_direction = 3, trace_pair_direction_more = 4, trace_pair_shadow = 5,
-};
-static int trace_bounce_pairs(int bounce) { return 2 + 6 * bounce; }
+// The global Sobol point's slots of the render's pairs (null for none).
+static const int8_t* sequence_slots(const trace_context& context) {
+  return context.sequence_slots.empty() ? nullptr : context.sequence_slots.data();
+}
 
 // A point where a pilot path played the roulette: the throughput's largest
 // component, the probability of surviving, and the radiance gathered and
@@ -671,7 +708,7 @@ float estimate_roulette_threshold(const scene_data& scene, const scene_bvh& bvh,
           for (auto s = 0; s < pilot_samples; s++) {
             rays          = 0;
             auto sequence = make_sequence(pilot.sequence, seed, pixel, (uint32_t)s,
-                trace_bounce_pairs(pilot.sobol_bounces));
+                trace_bounce_pairs(pilot.sobol_bounces), sequence_slots(context));
             auto ray = sample_camera_ray(camera, i, j, size.x, size.y, sequence);
             if (!is_traceable_ray(ray)) continue;
             points.clear();
@@ -738,7 +775,7 @@ std::vector<float> estimate_sample_rates(const scene_data& scene, const scene_bv
         rays          = 0;
         for (auto s = 0; s < 2; s++) {
           auto sequence = make_sequence(pilot.sequence, seed, pixel, (uint32_t)s,
-              trace_bounce_pairs(pilot.sobol_bounces));
+              trace_bounce_pairs(pilot.sobol_bounces), sequence_slots(context));
           auto ray = sample_camera_ray(camera, i, j, size.x, size.y, sequence);
           if (!is_traceable_ray(ray)) continue;
           auto radiance = trace_path(walk, ray, sequence);
@@ -848,7 +885,7 @@ static void trace_rows(trace_state& state, const scene_data& scene, const scene_
         if (n % every != 0) continue;
         auto s        = (uint32_t)(n / every);
         auto sequence = make_sequence(params.sequence, params.seed, pixel, s,
-            trace_bounce_pairs(params.sobol_bounces));
+            trace_bounce_pairs(params.sobol_bounces), sequence_slots(context));
         auto ray = sample_camera_ray(camera, i, j, state.width, state.height, sequence);
         // validate_scene checked the camera; a ray that round-off still
         // made untraceable counts as a dropped sample.

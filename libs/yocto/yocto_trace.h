@@ -55,7 +55,7 @@ struct trace_params {
   int                resolution = 720;  // largest image side
   trace_sampler_type sampler    = trace_sampler_type::path;
   trace_lights_type  lights     = trace_lights_type::automatic;
-  sequence_type      sequence   = sequence_type::sobol;  // random numbers of a pixel
+  sequence_type      sequence   = sequence_type::global_sobol;  // random numbers of a pixel
   int                sobol_bounces = 32;  // bounces with Sobol numbers, then independent
   int                samples    = 64;
   int                bounces    = 32;    // scattering events per path (pbrt maxdepth)
@@ -108,6 +108,9 @@ struct trace_context {
   std::vector<int>              instance_light       = {};  // light of an instance, -1 none
   std::vector<int>              environment_light    = {};  // light of an environment, -1 none
   std::vector<frame3f>          environment_inverses = {};  // world to local
+  // Slot of each pair in the global Sobol point, -1 for padded pairs
+  // (sequence_type::global_sobol only).
+  std::vector<int8_t>           sequence_slots       = {};
 };
 
 trace_context make_trace_context(const scene_data& scene, const trace_params& params = {});

@@ -57,8 +57,9 @@ VARIANTS = [
     ("after-shadow-0", "after", ["--shadow-threshold", "0"]),
     ("after-split-2", "after", ["--split", "2"]),
     ("after-adaptive", "after", ["--adaptive"]),
-    ("after-four-sobol", "after", ["--hair-four-numbers"]),
-    ("after-four-independent", "after", ["--hair-four-numbers", "--sequence", "independent"]),
+    ("after-sobol-pairs", "after", ["--sequence", "sobol"]),
+    ("after-demux", "after", ["--hair-demux"]),
+    ("after-demux-independent", "after", ["--hair-demux", "--sequence", "independent"]),
 ]
 # The two defaults are timed --headline-runs times, the levers --runs times.
 HEADLINE = ["before", "after"]
@@ -66,6 +67,8 @@ HEADLINE = ["before", "after"]
 # the variant that turns it on: below 1, it does not pay).
 LEVERS = [
     ("Sobol numbers (against independent ones)", "after-independent"),
+    ("one global Sobol point (against shuffled Sobol pairs)", "after-sobol-pairs"),
+    ("hair sampled with four numbers (against two demuxed into four)", "after-demux"),
     ("roulette threshold from the pilot (against 1, the previous roulette)", "after-roulette-1"),
     ("hair lobe weights where no MIS needs the pdf (against eval / pdf)", "after-mixture-weight"),
     ("light choice: constant sky to BSDF sampling, MIS compensation", "after-lights-all"),
@@ -273,14 +276,14 @@ def write_report(args, rows, checks, hashes):
                      " | ".join(gain(name, "after", variant, 64) for name in scenes) + " |")
     lines += ["", "## The thesis's claim: two Sobol numbers demuxed into four", "",
               "MSE of the hair's direction sampled from two numbers demuxed into four (the "
-              "default), from four Sobol dimensions, and from four independent numbers (with "
-              "independent numbers everywhere, where the demux has nothing to preserve).", "",
+              "thesis's), from four Sobol dimensions (the default), and from independent "
+              "numbers everywhere (where the demux has nothing to preserve).", "",
               "| scene | spp | demux, Sobol | four Sobol | demux, independent | four independent |",
               "|---|---:|---:|---:|---:|---:|"]
     for name in scenes:
         for spp in CHECKPOINTS:
             values = [table.get((name, v, spp)) for v in
-                      ["after", "after-four-sobol", "after-independent", "after-four-independent"]]
+                      ["after-demux", "after", "after-demux-independent", "after-independent"]]
             if all(values):
                 lines.append(f"| {name} | {spp} | " +
                              " | ".join(f"{v['mse']:.4g}" for v in values) + " |")
