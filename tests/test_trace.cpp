@@ -414,10 +414,11 @@ TEST(trace, constant_sky_is_left_to_bsdf_sampling) {
 }
 
 TEST(trace, sobol_and_independent_numbers_agree_and_sobol_has_less_noise) {
-  // The hair scene at 24x24: Sobol and independent numbers render the same
-  // image in expectation (means within 1.5% at 256 spp), and the error at 16
-  // spp against a 512-spp Sobol reference is lower with Sobol numbers (a
-  // low-discrepancy sampler stratifies the pixel, lens and first bounces).
+  // The hair scene at 24x24: the global Sobol point (the default), Sobol
+  // pairs and independent numbers render the same image in expectation
+  // (means within 1.5% at 256 spp), and the error at 16 spp against a
+  // 512-spp reference is lower with either Sobol sequence (a low-discrepancy
+  // sampler stratifies the pixel, lens and first bounces).
   auto scene        = make_hair_test_scene();
   auto params       = trace_params{};
   params.resolution = 24;
@@ -433,18 +434,57 @@ TEST(trace, sobol_and_independent_numbers_agree_and_sobol_has_less_noise) {
     }
     return sum / image.pixels.size();
   };
-  params.samples     = 256;
-  params.seed        = 22;
-  auto sobol_mean    = image_mean(render_scene(scene, params).image);
-  params.sequence    = sequence_type::independent;
-  auto independent_mean = image_mean(render_scene(scene, params).image);
-  EXPECT_NEAR(sobol_mean / independent_mean, 1, 0.015) << sobol_mean << " " << independent_mean;
-  params.samples     = 16;
-  auto independent_mse = mse(render_scene(scene, params).image);
-  params.sequence    = sequence_type::sobol;
-  auto sobol_mse     = mse(render_scene(scene, params).image);
-  EXPECT_LT(sobol_mse, independent_mse) << sobol_mse << " " << independent_mse;
-  std::printf("mse at 16 spp: sobol %g independent %g\n", sobol_mse, independent_mse);
+  auto means = std::array<double, 3>{}, errors = std::array<double, 3>{};
+  auto types = std::array<sequence_type, 3>{
+      sequence_type::global_sobol, sequence_type::sobol, sequence_type::independent};
+  for (auto t = 0; t < 3; t++) {
+    params.sequence = types[t];
+    params.seed     = 22;
+    params.samples  = 256;
+    means[t]        = image_mean(render_scene(scene, params).image);
+    params.samples  = 16;
+    errors[t]       = mse(render_scene(scene, params).image);
+  }
+  EXPECT_NEAR(means[0] / means[2], 1, 0.015) << means[0] << " " << means[2];
+  EXPECT_NEAR(means[1] / means[2], 1, 0.015) << means[1] << " " << means[2];
+  EXPECT_LT(errors[0], errors[2]) << errors[0] << " " << errors[2];
+  EXPECT_LT(errors[1], errors[2]) << errors[1] << " " << errors[2];
+  std::printf("mse at 16 spp: global sobol %g, sobol pairs %g, independent %g\n", errors[0],
+      errors[1], errors[2]);
+}
+
+TEST(trace, global_sobol_slots_go_to_the_pairs_a_path_draws) {
+  // The hair test scene: a pinhole, a constant sky (left to BSDF sampling,
+  // so no light pairs), no glossy material, roulette from bounce 1. Pairs:
+  // 0 pixel, 1 lens, then 6 a bounce (light, light point, lobe/roulette,
+  // direction, four numbers' second pair, shadow). The 16 slots of the
+  // global point go, in path order, to the pixel, bounce 0's direction and
+  // its second pair, then roulette, direction and second pair of bounces
+  // 1 to 4 and bounce 5's roulette; every other pair is padded (-1).
+  auto scene   = make_hair_test_scene();
+  auto params  = trace_params{};
+  auto context = make_trace_context(scene, params);
+  auto& slots  = context.sequence_slots;
+  ASSERT_EQ(slots.size(), (size_t)(2 + 6 * params.sobol_bounces));
+  auto expected = std::vector<int8_t>(slots.size(), -1);
+  expected[0] = 0, expected[2 + 3] = 1, expected[2 + 4] = 2;
+  auto next = 3;
+  for (auto bounce = 1; next < 16; bounce++) {
+    for (auto pair : {2, 3, 4})
+      if (next < 16) expected[2 + 6 * bounce + pair] = (int8_t)next++;
+  }
+  EXPECT_TRUE(slots == expected);
+  // Hair sampled from two numbers: no second pair, so deeper bounces get
+  // slots (bounce 7's direction takes the last).
+  params.hair_sampling.four_numbers = false;
+  auto demux = make_trace_context(scene, params).sequence_slots;
+  EXPECT_EQ(demux[2 + 4], -1);
+  EXPECT_EQ(demux[2 + 3], 1);
+  EXPECT_EQ(demux[2 + 6 * 7 + 3], 15);
+  EXPECT_EQ(std::count_if(demux.begin(), demux.end(), [](int8_t s) { return s >= 0; }), 16);
+  // Other sequences take no slots.
+  params.sequence = sequence_type::sobol;
+  EXPECT_TRUE(make_trace_context(scene, params).sequence_slots.empty());
 }
 
 TEST(trace, russian_roulette_from_any_bounce_keeps_the_mean) {
