@@ -62,7 +62,7 @@ REFERENCE_FACTOR = {"hair-locks": 4}
 
 # name, yscene render arguments, threads. Everything runs on one thread but
 # path-2t; geometry variants are compared with the native reference. `path` is
-# the default command line (Sobol numbers, automatic lights);
+# the default command line (one global Sobol point, automatic lights);
 # independent-lights-all is the sampling of the default before them.
 VARIANTS = [
     ("path", [], 1),
@@ -74,8 +74,9 @@ VARIANTS = [
     ("lines-4", ["--curves", "lines", "--segments", "4"], 1),
     ("lines-8", ["--curves", "lines", "--segments", "8"], 1),
     ("flat", ["--flat-curves"], 1),
-    ("four-numbers", ["--hair-four-numbers"], 1),
-    ("four-independent", ["--hair-four-numbers", "--sequence", "independent"], 1),
+    ("sobol-pairs", ["--sequence", "sobol"], 1),
+    ("demux", ["--hair-demux"], 1),
+    ("demux-independent", ["--hair-demux", "--sequence", "independent"], 1),
     ("per-hit", ["--hair-per-hit"], 1),
     ("per-hit-fast-pow", ["--hair-per-hit", "--hair-fast-pow"], 1),
     ("path-2t", [], 2),
@@ -471,16 +472,18 @@ def write_report(out, config, results, limits, scales, pows, plots, command):
              "difference and stops falling where it dominates.", "",
              "Variants: `path` = the default command line: path tracing with MIS (light "
              "and BSDF sampling) of every light but a constant environment, which BSDF "
-             "sampling alone finds (`--lights automatic`), Owen-scrambled Sobol pairs per "
-             "pixel sample (`--sequence sobol`), native round Bezier curves, two random "
-             "numbers demuxed into four (Morton) for the hair lobes, hair material terms "
+             "sampling alone finds (`--lights automatic`), one Owen-scrambled Sobol point "
+             "over 32 dimensions per pixel sample (`--sequence global-sobol`), native round "
+             "Bezier curves, four numbers (two pairs of that point) for the hair, hair "
+             "material terms "
              "once per material; `independent` = `path` with independent (PCG) numbers; "
              "`lights-all` = `path` sampling every light with MIS, a constant environment "
              "too; `independent-lights-all` = both, the sampling of the previous default; "
              "`naive` = BSDF sampling only; `lines-N` = N line segments per Bezier segment; "
-             "`flat` = ray-facing flat curves; `four-numbers` = four numbers (two Sobol "
-             "pairs) instead of the demux; `four-independent` = four independent numbers "
-             "instead of the demux (the previous `four-numbers`); `per-hit` = the hair "
+             "`flat` = ray-facing flat curves; `sobol-pairs` = `path` with shuffled Sobol "
+             "pairs (`--sequence sobol`, the previous default); `demux` = two numbers "
+             "demuxed into four (Morton) for the hair instead of four, as in the thesis; "
+             "`demux-independent` = the demux with independent numbers; `per-hit` = the hair "
              "material terms (with its two std::pow calls) computed at every hit as the "
              "thesis did; `per-hit-fast-pow` = the same with the fast integer power instead "
              "of std::pow; `path-2t` = `path` on two threads. Variants not named "
