@@ -493,11 +493,13 @@ TEST(sampling, global_sobol_projections_are_nets) {
 TEST(sampling, global_sobol_sequence_takes_slots) {
   // A pair with a slot draws that slot's dimensions of the global point; a
   // pair with slot -1 draws the shuffled Sobol pair of sequence_type::sobol;
-  // pairs past sobol_pairs the stream. Without slots global_sobol is sobol.
-  auto slots = std::array<int8_t, 6>{0, -1, 5, 1, 15, -1};
+  // pairs past sobol_pairs the stream, and pairs past the list of slots
+  // (global_pairs, 5 here: the 9 is not read) are padded. Without slots
+  // global_sobol is sobol.
+  auto slots = std::array<int8_t, 6>{0, -1, 5, 1, 15, 9};
   for (auto pixel : {(int64_t)0, (int64_t)777}) {
     for (auto s : {0u, 9u, 4000u}) {
-      auto global = make_sequence(sequence_type::global_sobol, 3, pixel, s, 6, slots.data());
+      auto global = make_sequence(sequence_type::global_sobol, 3, pixel, s, 6, slots.data(), 5);
       auto pairs  = make_sequence(sequence_type::sobol, 3, pixel, s, 6);
       auto plain  = make_sequence(sequence_type::global_sobol, 3, pixel, s, 6);
       for (auto pair = 0; pair < 8; pair++) {
@@ -505,7 +507,7 @@ TEST(sampling, global_sobol_sequence_takes_slots) {
         auto other = sample_sequence2f(pairs, pair);
         auto same  = sample_sequence2f(plain, pair);
         EXPECT_EQ(float_bits(same.x), float_bits(other.x)) << pair;
-        if (pair < 6 && slots[pair] >= 0) {
+        if (pair < 5 && slots[pair] >= 0) {
           auto expected = sample_sobol_global2f(s, global.key, slots[pair]);
           EXPECT_EQ(float_bits(point.x), float_bits(expected.x)) << pair;
           EXPECT_EQ(float_bits(point.y), float_bits(expected.y)) << pair;
@@ -518,7 +520,7 @@ TEST(sampling, global_sobol_sequence_takes_slots) {
         }
       }
       // Four numbers from two slotted pairs are the two pairs' points.
-      auto four = make_sequence(sequence_type::global_sobol, 3, pixel, s, 6, slots.data());
+      auto four = make_sequence(sequence_type::global_sobol, 3, pixel, s, 6, slots.data(), (int)slots.size());
       auto quad = sample_sequence4f(four, 2);
       auto a    = sample_sobol_global2f(s, four.key, 5);
       auto b    = sample_sobol_global2f(s, four.key, 1);
@@ -542,7 +544,7 @@ TEST(sampling, global_sobol_is_uniform_and_independent_over_pixels) {
     auto across = std::vector<int>(256);
     for (auto pixel = 0; pixel < 4096; pixel++) {
       for (auto s = 0u; s < 16; s++) {
-        auto state = make_sequence(sequence_type::global_sobol, seed, pixel, s, 16, slots.data());
+        auto state = make_sequence(sequence_type::global_sobol, seed, pixel, s, 16, slots.data(), (int)slots.size());
         auto zero  = vec2f{};
         for (auto [i, slot] : {std::pair{0, 0}, std::pair{1, 7}, std::pair{2, 15}}) {
           auto p = sample_sequence2f(state, slot);
@@ -566,7 +568,7 @@ TEST(sampling, global_sobol_is_uniform_and_independent_over_pixels) {
   auto points = [&](uint64_t seed, int64_t pixel) {
     auto result = std::vector<vec2f>(16);
     for (auto s = 0u; s < 16; s++) {
-      auto state = make_sequence(sequence_type::global_sobol, seed, pixel, s, 16, slots.data());
+      auto state = make_sequence(sequence_type::global_sobol, seed, pixel, s, 16, slots.data(), (int)slots.size());
       result[s]  = sample_sequence2f(state, 3);
     }
     return result;
@@ -588,8 +590,8 @@ TEST(sampling, global_sobol_points_are_pure_functions) {
   auto slots = std::array<int8_t, 10>{0, 1, 2, 3, 4, 5, 6, 7, 8, 9};
   for (auto pixel : {0, 77, 1 << 20}) {
     for (auto s : {0u, 1u, 1000u}) {
-      auto forward  = make_sequence(sequence_type::global_sobol, 42, pixel, s, 10, slots.data());
-      auto backward = make_sequence(sequence_type::global_sobol, 42, pixel, s, 10, slots.data());
+      auto forward  = make_sequence(sequence_type::global_sobol, 42, pixel, s, 10, slots.data(), (int)slots.size());
+      auto backward = make_sequence(sequence_type::global_sobol, 42, pixel, s, 10, slots.data(), (int)slots.size());
       auto first = std::vector<vec2f>(10), second = std::vector<vec2f>(10);
       for (auto pair = 0; pair < 10; pair++) first[pair] = sample_sequence2f(forward, pair);
       for (auto pair = 9; pair >= 0; pair--) second[pair] = sample_sequence2f(backward, pair);
@@ -612,7 +614,7 @@ static double integration_rms_error_across(sequence_type type, int pair) {
   for (auto pixel = 0; pixel < 256; pixel++) {
     auto estimate = 0.0;
     for (auto s = 0u; s < 64; s++) {
-      auto state = make_sequence(type, 77, pixel, s, 16, slots.data());
+      auto state = make_sequence(type, 77, pixel, s, 16, slots.data(), (int)slots.size());
       auto x0 = (double)sample_sequence2f(state, 0).x;
       auto x1 = (double)sample_sequence2f(state, pair).x;
       estimate += x0 * x1 * std::exp(x0 + x1);

@@ -300,28 +300,33 @@ inline const auto sequence_names = std::array<std::string, 3>{
 // The numbers of one pixel sample. They are drawn as pairs of dimensions at
 // fixed positions (a path's bounce k uses the same pairs in every sample);
 // Sobol pairs below `sobol_pairs`, a hashed PCG stream past them. With
-// global_sobol, pair p below `sobol_pairs` takes the dimensions of slot
-// global_slots[p] of the global point, if not negative.
+// global_sobol, pair p below both `sobol_pairs` and `global_pairs` takes the
+// dimensions of slot global_slots[p] of the global point, if not negative.
 struct sequence_state {
   sequence_type type        = sequence_type::sobol;
   uint64_t      key         = 0;  // hash of seed and pixel
   uint32_t      index       = 0;  // sample index
   int           sobol_pairs = 0;
   const int8_t* global_slots = nullptr;
+  int           global_pairs = 0;  // entries of global_slots
   rng_state     rng         = {};
 };
 
 // The sequence of sample `sample` of pixel `pixel`: a pure function of its
 // arguments, so that any range of samples renders alone.
 inline sequence_state make_sequence(sequence_type type, uint64_t seed, int64_t pixel,
-    uint32_t sample, int sobol_pairs, const int8_t* global_slots = nullptr) {
+    uint32_t sample, int sobol_pairs, const int8_t* global_slots = nullptr,
+    int global_pairs = 0) {
   auto seed_hash    = hash_uint64(seed);
   auto state        = sequence_state{};
   state.type        = type;
   state.key         = hash_uint64(seed_hash ^ (uint64_t)pixel);
   state.index       = sample;
   state.sobol_pairs = type != sequence_type::independent ? sobol_pairs : 0;
-  state.global_slots = type == sequence_type::global_sobol ? global_slots : nullptr;
+  if (type == sequence_type::global_sobol && global_slots) {
+    state.global_slots = global_slots;
+    state.global_pairs = global_pairs;
+  }
   auto key   = seed_hash ^ hash_uint64(((uint64_t)pixel << 24) ^ (uint64_t)sample);
   state.rng  = make_rng(hash_uint64(key), (uint64_t)pixel);
   return state;
@@ -330,7 +335,7 @@ inline sequence_state make_sequence(sequence_type type, uint64_t seed, int64_t p
 // The pair of dimensions `pair` of the sample.
 inline vec2f sample_sequence2f(sequence_state& state, int pair) {
   if (pair < state.sobol_pairs) {
-    if (state.global_slots && state.global_slots[pair] >= 0)
+    if (pair < state.global_pairs && state.global_slots[pair] >= 0)
       return sample_sobol_global2f(state.index, state.key, state.global_slots[pair]);
     return sample_sobol2f(state.index, state.key ^ ((uint64_t)pair << 40));
   }

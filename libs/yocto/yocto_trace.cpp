@@ -27,27 +27,31 @@ enum trace_pair {
   trace_pair_light = 0, trace_pair_light_point = 1, trace_pair_lobe_roulette = 2,
   trace_pair_direction = 3, trace_pair_direction_more = 4, trace_pair_shadow = 5,
 };
-static int trace_bounce_pairs(int bounce) { return 2 + 6 * bounce; }
+// (Capped so that no --sobol-bounces overflows an int; no path goes deeper.)
+static int trace_bounce_pairs(int bounce) { return 2 + 6 * std::min(bounce, 1 << 24); }
 
 // The pairs that take the slots of the global Sobol point (global_sobol),
 // in the order a path draws them, leaving out those this render never
 // draws (the lens of a pinhole, lights where none are sampled, the roulette
 // before its first bounce, the glossy lobe where no material is glossy), so
-// that the dimensions a path uses are the lowest, best stratified ones.
+// that the dimensions a path uses are the lowest, best stratified ones. The
+// list ends at the last pair with a slot (later pairs are padded).
 static std::vector<int8_t> make_sequence_slots(
     const scene_data& scene, const trace_params& params, bool samples_lights) {
-  auto slots = std::vector<int8_t>((size_t)trace_bounce_pairs(params.sobol_bounces), -1);
+  auto slots = std::vector<int8_t>{};
   auto next  = 0;
   auto take  = [&](int pair) {
-    if (pair < (int)slots.size() && next < sobol_global_dimensions / 2)
-      slots[pair] = (int8_t)next++;
+    if (next >= sobol_global_dimensions / 2) return;
+    slots.resize(std::max(slots.size(), (size_t)pair + 1), -1);
+    slots[pair] = (int8_t)next++;
   };
   auto& camera = scene.cameras[std::clamp(params.camera, 0, (int)scene.cameras.size() - 1)];
   auto glossy  = false, four_numbers = params.hair_sampling.four_numbers;
   for (auto& material : scene.materials) glossy |= material.type == material_type::glossy;
   take(trace_pair_pixel);
   if (!camera.orthographic && camera.aperture > 0) take(trace_pair_lens);
-  for (auto bounce = 0; bounce < params.sobol_bounces; bounce++) {
+  for (auto bounce = 0; bounce < params.sobol_bounces && next < sobol_global_dimensions / 2;
+       bounce++) {
     auto pairs = trace_bounce_pairs(bounce);
     if (samples_lights) take(pairs + trace_pair_light), take(pairs + trace_pair_light_point);
     if (glossy || bounce >= params.roulette_bounce) take(pairs + trace_pair_lobe_roulette);
@@ -275,9 +279,13 @@ static trace_light_value eval_light_sample(const scene_data& scene,
   }
 }
 
-// The global Sobol point's slots of the render's pairs (null for none).
-static const int8_t* sequence_slots(const trace_context& context) {
-  return context.sequence_slots.empty() ? nullptr : context.sequence_slots.data();
+// A pixel sample's sequence: the render's sequence type, its Sobol pairs and,
+// for global_sobol, the pairs' slots.
+static sequence_state make_pixel_sequence(const trace_context& context,
+    const trace_params& params, uint64_t seed, int64_t pixel, uint32_t sample) {
+  return make_sequence(params.sequence, seed, pixel, sample,
+      trace_bounce_pairs(params.sobol_bounces), context.sequence_slots.data(),
+      (int)context.sequence_slots.size());
 }
 
 // A point where a pilot path played the roulette: the throughput's largest
@@ -707,8 +715,7 @@ float estimate_roulette_threshold(const scene_data& scene, const scene_bvh& bvh,
           auto sum  = glm::dvec3{0, 0, 0};
           for (auto s = 0; s < pilot_samples; s++) {
             rays          = 0;
-            auto sequence = make_sequence(pilot.sequence, seed, pixel, (uint32_t)s,
-                trace_bounce_pairs(pilot.sobol_bounces), sequence_slots(context));
+            auto sequence = make_pixel_sequence(context, pilot, seed, pixel, (uint32_t)s);
             auto ray = sample_camera_ray(camera, i, j, size.x, size.y, sequence);
             if (!is_traceable_ray(ray)) continue;
             points.clear();
@@ -774,8 +781,7 @@ std::vector<float> estimate_sample_rates(const scene_data& scene, const scene_bv
         auto values   = std::array<vec3f, 2>{};
         rays          = 0;
         for (auto s = 0; s < 2; s++) {
-          auto sequence = make_sequence(pilot.sequence, seed, pixel, (uint32_t)s,
-              trace_bounce_pairs(pilot.sobol_bounces), sequence_slots(context));
+          auto sequence = make_pixel_sequence(context, pilot, seed, pixel, (uint32_t)s);
           auto ray = sample_camera_ray(camera, i, j, size.x, size.y, sequence);
           if (!is_traceable_ray(ray)) continue;
           auto radiance = trace_path(walk, ray, sequence);
@@ -884,8 +890,7 @@ static void trace_rows(trace_state& state, const scene_data& scene, const scene_
       for (auto n = (int64_t)next * paths; n < (int64_t)(next + count) * paths; n++) {
         if (n % every != 0) continue;
         auto s        = (uint32_t)(n / every);
-        auto sequence = make_sequence(params.sequence, params.seed, pixel, s,
-            trace_bounce_pairs(params.sobol_bounces), sequence_slots(context));
+        auto sequence = make_pixel_sequence(context, params, params.seed, pixel, s);
         auto ray = sample_camera_ray(camera, i, j, state.width, state.height, sequence);
         // validate_scene checked the camera; a ray that round-off still
         // made untraceable counts as a dropped sample.
