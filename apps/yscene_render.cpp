@@ -212,7 +212,7 @@ static std::string render_settings(const scene_data& scene, const trace_params& 
   line("clamp", number(params.clamp));
   // Only when on, so that the settings of renders without AOVs stay as they were.
   if (params.aovs) line("aovs", "1");
-  if (params.adaptive) line("adaptive", "1");
+  line("adaptive", trace_adaptive_names[(int)params.adaptive]);
   line("hair", std::string(params.hair_sampling.four_numbers ? "four-numbers" : "demux") +
                    (params.hair_sampling.per_hit ? " per-hit" : "") +
                    (params.hair_sampling.mixture_weight ? " mixture-weight" : "") +
@@ -497,12 +497,13 @@ static int render_scene(const render_options& options, trace_params params,
     std::printf("stats load_seconds=%.6f bvh_seconds=%.6f bvh_bytes=%lld segments=%zu "
                 "bvh_build_peak_bytes=%lld curve_pieces=%zu width=%d height=%d spp=%d "
                 "render_seconds=%.6f render_cpu=%.6f rays=%lld peak_memory=%lld clamped=%lld "
-                "clamped_energy=%.6g roulette_threshold=%.6g\n",
+                "clamped_energy=%.6g roulette_threshold=%.6g adaptive=%d adaptive_gain=%.4g\n",
         load_time, bvh.build_seconds, (long long)bvh.peak_memory, segments,
         (long long)bvh.build_peak_memory, pieces, state.width,
         state.height, state.samples, render_time, render_cpu, (long long)state.rays.load(),
         (long long)peak_memory(), (long long)state.clamped.load(),
-        clamped_energy_fraction(state), state.roulette_threshold);
+        clamped_energy_fraction(state), state.roulette_threshold, state.adaptive ? 1 : 0,
+        state.adaptive_gain);
   }
   return 0;
 } catch (const std::bad_alloc&) {
@@ -543,9 +544,13 @@ CLI::App* add_render_command(CLI::App& app, render_command& command, std::string
       ->check(CLI::NonNegativeNumber);
   render->add_option("--roulette-threshold", params.roulette_threshold,
           "paths whose throughput falls below this play Russian roulette");
-  render->add_flag("--adaptive", params.adaptive,
-      "adaptive sampling: a pilot gives each pixel more or fewer paths a sample by its "
-      "variance and cost, at the rays of uniform sampling (unbiased)");
+  render->add_flag_callback("--adaptive", [&params] { params.adaptive = trace_adaptive_type::on; },
+      "adaptive sampling always: a pilot gives each pixel more or fewer paths a sample by its "
+      "variance and cost, at the rays of uniform sampling (unbiased); by default it is on "
+      "where the roulette's pilot predicts a gain of 1.7 or more and at most 64 spp");
+  render->add_flag_callback("--no-adaptive",
+      [&params] { params.adaptive = trace_adaptive_type::off; },
+      "no adaptive sampling: every pixel one path a sample");
   render->add_option("--split", params.split,
           "paths per camera ray, sharing its first hit");
   render->add_option("--shadow-threshold", params.shadow_threshold,

@@ -254,7 +254,7 @@ TEST(merge, adaptive_renders_of_ranges_add_up_to_one_render) {
   auto params       = trace_params{};
   params.resolution = 24;
   params.samples    = 16;
-  params.adaptive   = true;
+  params.adaptive   = trace_adaptive_type::on;
   params.threads    = 2;
   ASSERT_TRUE(check_trace_params(scene, params, error)) << error;
   auto context = make_trace_context(scene, params);

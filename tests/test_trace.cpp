@@ -760,7 +760,7 @@ TEST(trace, adaptive_sampling_keeps_the_mean_and_spends_where_the_noise_is) {
   params.seed       = 23;
   params.roulette_threshold = 0.5f;
   auto uniform_state = render_scene(scene, params);
-  params.adaptive    = true;
+  params.adaptive    = trace_adaptive_type::on;
   auto adaptive_state = render_scene(scene, params);
   EXPECT_TRUE(uniform_state.rates.empty());
   ASSERT_EQ(adaptive_state.rates.size(), uniform_state.sums.size());
@@ -794,16 +794,84 @@ TEST(trace, adaptive_sampling_lowers_the_error_for_its_rays) {
   auto uniform = 0.0, adaptive = 0.0;
   for (auto seed : {1, 2, 3}) {
     params.seed     = (uint64_t)seed;
-    params.adaptive = false;
+    params.adaptive = trace_adaptive_type::off;
     auto one        = render_scene(scene, params);
     uniform += image_mse(one.image, reference) * (double)one.rays;
-    params.adaptive = true;
+    params.adaptive = trace_adaptive_type::on;
     auto other      = render_scene(scene, params);
     adaptive += image_mse(other.image, reference) * (double)other.rays;
   }
   std::printf("[ figure ] MSE x rays: uniform %g adaptive %g (%.2fx)\n", uniform, adaptive,
       adaptive / uniform);
   EXPECT_LT(adaptive, uniform);
+}
+
+// A glossy wall under a constant sky, filling the frame (every pixel sees
+// the same kind of point, and the noise of the coat's lobe choice is even)
+// or a sixth of it (the sky's pixels around it have no variance).
+static scene_data make_glossy_wall_scene(float size) {
+  auto scene = scene_data{};
+  scene.cameras.push_back(make_test_camera(2));
+  scene.environments.push_back({identity3x4f, {1, 1, 1}, -1});
+  scene.shapes.push_back(make_quad_shape({size, size}));
+  auto wall      = material_data{};
+  wall.type      = material_type::glossy;
+  wall.color     = {0.2f, 0.3f, 0.5f};
+  wall.roughness = 0.3f;
+  scene.materials.push_back(wall);
+  scene.instances.push_back({identity3x4f, 0, 0});
+  return scene;
+}
+
+TEST(trace, automatic_adaptive_sampling_follows_the_pilots_gain) {
+  // The rule: on and off always; automatic from a predicted gain of 1.7 at
+  // up to 64 spp.
+  auto params     = trace_params{};
+  params.samples  = 64;
+  EXPECT_TRUE(use_adaptive_sampling(params, 1.7f));
+  EXPECT_FALSE(use_adaptive_sampling(params, 1.69f));
+  params.samples = 65;
+  EXPECT_FALSE(use_adaptive_sampling(params, 100.0f));
+  params.adaptive = trace_adaptive_type::on;
+  EXPECT_TRUE(use_adaptive_sampling(params, 0.0f));
+  params.samples  = 16;
+  params.adaptive = trace_adaptive_type::off;
+  EXPECT_FALSE(use_adaptive_sampling(params, 100.0f));
+  // The pilot's gain (32x32, 16 spp): a wall that fills a sixth of the frame
+  // (the sky's pixels have no variance) above 1.7; one that fills it below; the
+  // same bits with 1 and 2 threads. A default render of each samples
+  // adaptively exactly when its gain says so, with rates only then.
+  params          = trace_params{};
+  params.resolution = 32;
+  params.samples  = 16;
+  params.threads  = 1;
+  auto gains = std::vector<float>{};
+  for (auto uneven : {true, false}) {
+    auto scene = make_glossy_wall_scene(uneven ? 0.6f : 8.0f);
+    auto bvh   = scene_bvh{};
+    auto error = std::string{};
+    ASSERT_TRUE(make_scene_bvh(bvh, scene, {}, error)) << error;
+    auto context = make_trace_context(scene, params);
+    auto pilot   = run_trace_pilot(scene, bvh, context, params);
+    auto two     = params;
+    two.threads  = 2;
+    auto again   = run_trace_pilot(scene, bvh, context, two);
+    EXPECT_EQ(again.adaptive_gain, pilot.adaptive_gain);
+    EXPECT_EQ(again.roulette_threshold, pilot.roulette_threshold);
+    EXPECT_EQ(pilot.roulette_threshold, estimate_roulette_threshold(scene, bvh, context, params));
+    std::printf("[ figure ] adaptive gain predicted, %s: %.4g\n",
+        uneven ? "a sixth of the frame" : "the whole frame", pilot.adaptive_gain);
+    EXPECT_GE(pilot.adaptive_gain, 1.0f);
+    gains.push_back(pilot.adaptive_gain);
+    auto state = trace_state{};
+    init_trace_state(state, scene, params);
+    trace_samples(state, scene, bvh, context, params, 1);
+    EXPECT_EQ(state.adaptive_gain, pilot.adaptive_gain);
+    EXPECT_EQ(state.adaptive, uneven);
+    EXPECT_EQ(state.rates.empty(), !uneven);
+  }
+  EXPECT_GT(gains[0], 1.7f);
+  EXPECT_LT(gains[1], 1.7f);
 }
 
 TEST(trace, adaptive_images_are_unbiased_at_any_sample_count) {
@@ -819,7 +887,7 @@ TEST(trace, adaptive_images_are_unbiased_at_any_sample_count) {
     auto params       = trace_params{};
     params.resolution = 16;
     params.samples    = samples;
-    params.adaptive   = true;
+    params.adaptive   = trace_adaptive_type::on;
     for (auto count : {1, 3, samples}) {
       auto state = render_scene(sky, params, 0, count);
       ASSERT_EQ(state.rates.size(), (size_t)256);
@@ -838,7 +906,7 @@ TEST(trace, adaptive_renders_do_not_depend_on_threads) {
   auto params       = trace_params{};
   params.resolution = 32;
   params.samples    = 16;
-  params.adaptive   = true;
+  params.adaptive   = trace_adaptive_type::on;
   params.threads    = 1;
   auto one          = render_scene(make_hair_test_scene(), params);
   params.threads    = 2;
@@ -855,13 +923,13 @@ TEST(trace, adaptive_sample_numbers_are_checked) {
   auto scene      = make_hair_test_scene();
   auto params     = trace_params{};
   auto error      = std::string{};
-  params.adaptive = true;
+  params.adaptive = trace_adaptive_type::on;
   params.samples  = 1 << 28;
   EXPECT_TRUE(check_trace_params(scene, params, error)) << error;
   params.samples = (1 << 28) + 1;
   EXPECT_FALSE(check_trace_params(scene, params, error));
   EXPECT_NE(error.find("adaptive"), std::string::npos) << error;
-  params.adaptive = false;
+  params.adaptive = trace_adaptive_type::off;
   EXPECT_TRUE(check_trace_params(scene, params, error)) << error;
 }
 

@@ -4,6 +4,7 @@
 
 #include "yocto_trace.h"
 
+#include <limits>
 #include <pmmintrin.h>
 #include <tbb/blocked_range.h>
 #include <xmmintrin.h>
@@ -544,6 +545,21 @@ namespace yocto {
 // Most paths a sample of an adaptive pixel.
 static const int adaptive_max_paths = 16;
 
+// Measured limits of the automatic choice (see the header).
+static const float adaptive_auto_min_gain    = 1.7f;
+static const int   adaptive_auto_max_samples = 64;
+
+bool use_adaptive_sampling(const trace_params& params, float adaptive_gain) {
+  if (params.adaptive != trace_adaptive_type::automatic)
+    return params.adaptive == trace_adaptive_type::on;
+  return params.samples <= adaptive_auto_max_samples && adaptive_gain >= adaptive_auto_min_gain;
+}
+
+// Whether the render may sample adaptively, before its pilot says.
+static bool may_use_adaptive_sampling(const trace_params& params) {
+  return use_adaptive_sampling(params, std::numeric_limits<float>::max());
+}
+
 bool check_trace_params(const scene_data& scene, const trace_params& params,
     std::string& error) {
   if (scene.cameras.empty()) return error = "the scene has no camera", false;
@@ -559,7 +575,7 @@ bool check_trace_params(const scene_data& scene, const trace_params& params,
   if ((int64_t)params.samples * params.split > ((int64_t)1 << 32))
     return error = "samples times split must stay below 2^32", false;
   // Adaptive pixels take up to 16 paths a sample, numbered in 32 bits too.
-  if (params.adaptive &&
+  if (may_use_adaptive_sampling(params) &&
       (int64_t)params.samples * params.split * adaptive_max_paths > ((int64_t)1 << 32))
     return error = "samples times split times 16 must stay below 2^32 with adaptive sampling",
            false;
@@ -573,7 +589,7 @@ bool check_trace_params(const scene_data& scene, const trace_params& params,
 double trace_image_bytes(const scene_data& scene, const trace_params& params) {
   auto size = camera_resolution(scene.cameras[params.camera], params.resolution);
   // Adaptive sampling: the rates, and the pilot's variances, costs and a row.
-  auto adaptive = params.adaptive ? sizeof(float) + 3 * sizeof(double) : 0;
+  auto adaptive = may_use_adaptive_sampling(params) ? sizeof(float) + 3 * sizeof(double) : 0;
   return (double)size.x * (double)size.y *
              (sizeof(fixed_sum3) + sizeof(vec3f) + 3 * sizeof(uint8_t) + adaptive) +
          trace_aov_bytes(scene, params);
@@ -643,6 +659,8 @@ void init_trace_state(trace_state& state, const scene_data& scene, const trace_p
   state.rays      = 0;
   state.nonfinite = 0;
   state.roulette_threshold = 0;
+  state.adaptive_gain      = 0;
+  state.adaptive           = false;
   state.rates.clear();
 }
 
@@ -677,7 +695,7 @@ static void parallel_chunks(int64_t size, int64_t grain, int threads, Func&& fun
 // scenes); the spread of the two sets' means gives V as the render's
 // stratified numbers make it. The tails are those of the pilot's own
 // roulette, each weighted by the inverse of its survival probability.
-float estimate_roulette_threshold(const scene_data& scene, const scene_bvh& bvh,
+trace_pilot run_trace_pilot(const scene_data& scene, const scene_bvh& bvh,
     const trace_context& context, const trace_params& params) {
   auto size   = camera_resolution(scene.cameras[params.camera], params.resolution);
   // 1% of the render's samples (2 x 8 on up to 1/1600 of its pixel samples),
@@ -695,6 +713,9 @@ float estimate_roulette_threshold(const scene_data& scene, const scene_bvh& bvh,
   // rays, samples, tail second moment, tail rays and roulette points; added
   // in row order.
   auto rows = std::vector<std::array<double, 7>>(ny);
+  // Per grid pixel: the variance of one path (mean over channels) and its
+  // rays, for the gain of adaptive sampling.
+  auto pixel_moments = std::vector<std::array<double, 2>>((size_t)nx * ny);
   parallel_chunks(ny, 1, params.threads, [&](int64_t begin, int64_t end) {
     auto points = std::vector<trace_roulette_point>{};
     auto rays   = (int64_t)0;
@@ -710,9 +731,11 @@ float estimate_roulette_threshold(const scene_data& scene, const scene_bvh& bvh,
         // their means is the variance of a pixel as the render's numbers
         // stratify it, not as independent ones would.
         glm::dvec3 means[2];
+        auto sum = glm::dvec3{0, 0, 0}, sum_squares = glm::dvec3{0, 0, 0};
+        auto paths = 0.0, pixel_rays = 0.0;
         for (auto set = 0; set < 2; set++) {
           auto seed = hash_uint64(params.seed ^ (0x70696c6f74ULL + (uint64_t)set));  // "pilot"
-          auto sum  = glm::dvec3{0, 0, 0};
+          auto set_sum = glm::dvec3{0, 0, 0};
           for (auto s = 0; s < pilot_samples; s++) {
             rays          = 0;
             auto sequence = make_pixel_sequence(context, pilot, seed, pixel, (uint32_t)s);
@@ -721,7 +744,11 @@ float estimate_roulette_threshold(const scene_data& scene, const scene_bvh& bvh,
             points.clear();
             auto radiance = trace_path(walk, ray, sequence);
             if (!isfinite(radiance)) continue;
+            set_sum += glm::dvec3(radiance);
             sum += glm::dvec3(radiance);
+            sum_squares += glm::dvec3(radiance) * glm::dvec3(radiance);
+            paths += 1;
+            pixel_rays += (double)rays;
             sums[2] += (double)rays;
             sums[3] += 1;
             for (auto& point : points) {
@@ -736,7 +763,13 @@ float estimate_roulette_threshold(const scene_data& scene, const scene_bvh& bvh,
               sums[6] += 1;
             }
           }
-          means[set] = sum / (double)pilot_samples;
+          means[set] = set_sum / (double)pilot_samples;
+        }
+        if (paths > 1) {
+          auto variance = (sum_squares - sum * sum / paths) / (paths - 1);
+          pixel_moments[(size_t)row * nx + column] = {
+              std::max((variance.x + variance.y + variance.z) / 3, 0.0),
+              std::max(pixel_rays / paths, 1.0)};
         }
         auto difference = means[0] - means[1];
         sums[0] += glm::dot(difference, difference) / 3;
@@ -747,16 +780,33 @@ float estimate_roulette_threshold(const scene_data& scene, const scene_bvh& bvh,
   auto totals = std::array<double, 7>{};
   for (auto& sums : rows)
     for (auto k = 0; k < 7; k++) totals[k] += sums[k];
-  if (!(totals[1] > 0 && totals[3] > 0 && totals[6] > 0)) return 1;
+  auto pilot_result = trace_pilot{};
+  // mean(v) mean(c) / mean(sqrt(v c))^2, in the grid's order.
+  auto variances = 0.0, costs = 0.0, deviations = 0.0;
+  for (auto& [variance, cost] : pixel_moments) {
+    variances += variance;
+    costs += cost;
+    deviations += std::sqrt(variance * cost);
+  }
+  auto gain = deviations > 0 ? variances * costs / (deviations * deviations) : 1.0;
+  pilot_result.adaptive_gain = std::isfinite(gain) ? (float)gain : 1.0f;
+  if (!(totals[1] > 0 && totals[3] > 0 && totals[6] > 0)) return pilot_result;
   // Var(mean A - mean B) = 2 V / n for V the variance of one sample.
   auto pixel_variance = pilot_samples * totals[0] / totals[1] / 2;
   auto pixel_cost     = totals[2] / totals[3];
   auto tail_moment = totals[4] / totals[6], tail_cost = totals[5] / totals[6];
-  if (!(tail_moment > 0) || !(tail_cost > 0)) return 1;
+  if (!(tail_moment > 0) || !(tail_cost > 0)) return pilot_result;
   auto threshold = std::sqrt(pixel_variance / pixel_cost) / std::sqrt(tail_moment / tail_cost);
-  if (!std::isfinite(threshold)) return 1;
-  return (float)std::clamp(threshold, 1.0 / 16, 1.0);
+  if (!std::isfinite(threshold)) return pilot_result;
+  pilot_result.roulette_threshold = (float)std::clamp(threshold, 1.0 / 16, 1.0);
+  return pilot_result;
 }
+
+float estimate_roulette_threshold(const scene_data& scene, const scene_bvh& bvh,
+    const trace_context& context, const trace_params& params) {
+  return run_trace_pilot(scene, bvh, context, params).roulette_threshold;
+}
+
 
 // The pilot of adaptive sampling (see the header): 2 paths a pixel, the
 // variance of their mean over channels and their rays, averaged over a
@@ -764,7 +814,6 @@ float estimate_roulette_threshold(const scene_data& scene, const scene_bvh& bvh,
 // render's estimated rays stay within those of one path a pixel sample.
 std::vector<float> estimate_sample_rates(const scene_data& scene, const scene_bvh& bvh,
     const trace_context& context, const trace_params& params, float roulette_threshold) {
-  if (!params.adaptive) return {};
   auto  size   = camera_resolution(scene.cameras[params.camera], params.resolution);
   auto& camera = scene.cameras[params.camera];
   auto  pixels = (size_t)size.x * size.y;
@@ -962,10 +1011,17 @@ static void trace_rows(trace_state& state, const scene_data& scene, const scene_
 static void init_roulette_threshold(trace_state& state, const scene_data& scene,
     const scene_bvh& bvh, const trace_context& context, const trace_params& params) {
   if (state.roulette_threshold > 0) return;
-  state.roulette_threshold = params.roulette_threshold > 0
-                                 ? params.roulette_threshold
-                                 : estimate_roulette_threshold(scene, bvh, context, params);
-  state.rates = estimate_sample_rates(scene, bvh, context, params, state.roulette_threshold);
+  // The pilot when the threshold or the choice of adaptive sampling needs it.
+  auto pilot = trace_pilot{};
+  if (params.roulette_threshold <= 0 || params.adaptive == trace_adaptive_type::automatic) {
+    pilot               = run_trace_pilot(scene, bvh, context, params);
+    state.adaptive_gain = pilot.adaptive_gain;
+  }
+  state.roulette_threshold = params.roulette_threshold > 0 ? params.roulette_threshold
+                                                           : pilot.roulette_threshold;
+  state.adaptive = use_adaptive_sampling(params, pilot.adaptive_gain);
+  if (state.adaptive)
+    state.rates = estimate_sample_rates(scene, bvh, context, params, state.roulette_threshold);
 }
 
 void trace_samples(trace_state& state, const scene_data& scene, const scene_bvh& bvh,

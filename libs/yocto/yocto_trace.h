@@ -19,8 +19,9 @@
 // the parameters and the seed, so every part of a split render finds the same
 // threshold. Where no MIS weight needs a BSDF pdf (no light to sample), a
 // sampled hair direction takes its lobe's own weight A_p / P(p), and the
-// lobes are not evaluated. With params.adaptive, a second pilot gives each
-// pixel more or fewer paths a sample by its variance and cost (see
+// lobes are not evaluated. With adaptive sampling (params.adaptive; by
+// default where the first pilot predicts that it pays), a second pilot gives
+// each pixel more or fewer paths a sample by its variance and cost (see
 // estimate_sample_rates), a pure function of the same inputs.
 //
 
@@ -50,6 +51,11 @@ inline const auto trace_sampler_names = std::array<std::string, 2>{"path", "naiv
 enum struct trace_lights_type { automatic, all };
 inline const auto trace_lights_names = std::array<std::string, 2>{"automatic", "all"};
 
+// Adaptive sampling: `automatic` turns it on where the roulette's pilot
+// predicts that it pays (see use_adaptive_sampling), `on` and `off` always.
+enum struct trace_adaptive_type { automatic, on, off };
+inline const auto trace_adaptive_names = std::array<std::string, 3>{"auto", "on", "off"};
+
 struct trace_params {
   int                camera     = 0;
   int                resolution = 720;  // largest image side
@@ -68,7 +74,7 @@ struct trace_params {
   // Adaptive sampling: a pilot measures each pixel's variance and cost, and
   // the pixel takes that many more or fewer paths per sample (see
   // estimate_sample_rates); off: every pixel one path per sample.
-  bool               adaptive   = false;
+  trace_adaptive_type adaptive  = trace_adaptive_type::automatic;
   // Sky samples that would add less than this times the sky's average
   // radiance play a roulette for their shadow ray (0 for none).
   float              shadow_threshold = 0.1f;
@@ -144,8 +150,12 @@ struct trace_state {
   std::vector<double>        row_energy     = {};
   std::vector<double>        row_clamped    = {};
   float                      roulette_threshold = 0;  // the render's, 0 until set
-  // Paths per sample of each pixel with params.adaptive (empty until set, and
-  // without it): an integer m >= 1 (m paths, each weighing 1 / m), or 1 / q
+  // The pilot's predicted gain of adaptive sampling (0 if no pilot ran) and
+  // whether the render samples adaptively (set with the threshold).
+  float                      adaptive_gain = 0;
+  bool                       adaptive      = false;
+  // Paths per sample of each pixel with adaptive sampling (empty until set,
+  // and without it): an integer m >= 1 (m paths, each weighing 1 / m), or 1 / q
   // for q a power of two (one path every q samples, weighing q).
   std::vector<float>         rates   = {};
 };
@@ -171,7 +181,28 @@ double trace_image_bytes(const scene_data& scene, const trace_params& params);
 float estimate_roulette_threshold(const scene_data& scene, const scene_bvh& bvh,
     const trace_context& context, const trace_params& params);
 
-// Paths per sample of every pixel for params.adaptive, proportional to the
+// What the roulette's pilot measures: the threshold above, and the gain in
+// efficiency that allocating samples to pixels by their standard deviation
+// over the square root of their cost would give if the variance of a pixel
+// fell as 1 / samples: mean(v) mean(c) / mean(sqrt(v c))^2 over the pilot's
+// pixels, v the variance of one path (of its 16) and c its rays.
+struct trace_pilot {
+  float roulette_threshold = 1;
+  float adaptive_gain      = 1;
+};
+trace_pilot run_trace_pilot(const scene_data& scene, const scene_bvh& bvh,
+    const trace_context& context, const trace_params& params);
+
+// Whether a render samples adaptively: `on`, never `off`; `automatic` where
+// the pilot predicts a gain of at least 1.7 and the render takes at most 64
+// samples. Both limits are measured (docs/RESULTS.md): below 1.7 (the curly
+// head, 1.45) adaptive sampling lost 4-12% of efficiency; at 256 samples
+// it lost up to 14% on the fur ball and the hair locks (gains of 4-5 that
+// Sobol's stratification of their fibre edges takes away: the pilot's
+// paths do not see it), and gained 6-30% on all of them at 16 and 64.
+bool use_adaptive_sampling(const trace_params& params, float adaptive_gain);
+
+// Paths per sample of every pixel for adaptive sampling, proportional to the
 // pixel's standard deviation over the square root of its cost (the
 // allocation that minimises the image's mean squared error for a given
 // cost), scaled so that the render costs what it would cost without, and
@@ -180,8 +211,7 @@ float estimate_roulette_threshold(const scene_data& scene, const scene_bvh& bvh,
 // variances and costs come from a pilot of 2 paths a pixel with numbers of
 // their own (the image stays unbiased: no path of the pilot is in it),
 // averaged over 7 x 7 pixels. A pure function of the scene, the parameters,
-// the threshold and the seed, as the roulette's pilot. Empty without
-// params.adaptive.
+// the threshold and the seed, as the roulette's pilot.
 std::vector<float> estimate_sample_rates(const scene_data& scene, const scene_bvh& bvh,
     const trace_context& context, const trace_params& params, float roulette_threshold);
 
