@@ -196,10 +196,10 @@ trace_pilot run_trace_pilot(const scene_data& scene, const scene_bvh& bvh,
 // Whether a render samples adaptively: `on`, never `off`; `automatic` where
 // the pilot predicts a gain of at least 1.7 and the render takes at most 64
 // samples. Both limits are measured (docs/RESULTS.md): below 1.7 (the curly
-// head, 1.45) adaptive sampling lost 4-12% of efficiency; at 256 samples
-// it lost up to 14% on the fur ball and the hair locks (gains of 4-5 that
+// head, 1.3-1.6: even noise) adaptive sampling gains nothing; at 256 samples
+// it lost 6% on the fur ball and 12% on the hair locks (gains of 4-5 that
 // Sobol's stratification of their fibre edges takes away: the pilot's
-// paths do not see it), and gained 6-30% on all of them at 16 and 64.
+// independent paths do not see it); at 16 and 64 it gained up to 37%.
 bool use_adaptive_sampling(const trace_params& params, float adaptive_gain);
 
 // Paths per sample of every pixel for adaptive sampling, proportional to the

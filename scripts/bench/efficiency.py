@@ -12,7 +12,7 @@ to the sum of their noise (about 1 when they agree, far above 1 when one is
 biased) and the difference of their means in standard errors. The error of a
 variant is its MSE against the mean of the two references minus the
 references' own noise (so that it is the variant's alone); its efficiency is
-1 / (MSE * CPU seconds) at 16, 64 and 256 spp, where CPU seconds are the
+1 / (MSE * CPU seconds) at 16, 64 and 256 spp (each its own render), where CPU seconds are the
 render's CPU time (all threads, loading and BVH build excluded), the median
 of --runs runs. Variants render on --threads threads (2: the machine).
 
@@ -56,6 +56,7 @@ VARIANTS = [
     ("after-whole-curves", "after", ["--curve-pieces", "1"]),
     ("after-shadow-0", "after", ["--shadow-threshold", "0"]),
     ("after-split-2", "after", ["--split", "2"]),
+    ("after-no-adaptive", "after", ["--no-adaptive"]),
     ("after-adaptive", "after", ["--adaptive"]),
     ("after-sobol-pairs", "after", ["--sequence", "sobol"]),
     ("after-demux", "after", ["--hair-demux"]),
@@ -75,7 +76,8 @@ LEVERS = [
     ("bent curves in exact pieces", "after-whole-curves"),
     ("shadow-ray roulette", "after-shadow-0"),
     ("no splitting at the first hit (against 2 paths per camera ray)", "after-split-2"),
-    ("no adaptive sampling (against --adaptive: below 1, adaptive pays)", "after-adaptive"),
+    ("adaptive sampling where the pilot predicts a gain (against none)", "after-no-adaptive"),
+    ("the pilot's choice (against adaptive sampling always)", "after-adaptive"),
 ]
 CHECKPOINTS = [16, 64, 256]
 
@@ -96,15 +98,13 @@ def scene_path(name, yscene):
     return path
 
 
-def render(binary, scene, output, spp, resolution, seed, threads, args, checkpoints=False):
-    """Renders (if not cached) and returns the stats fields and checkpoint rows."""
+def render(binary, scene, output, spp, resolution, seed, threads, args):
+    """Renders and returns the stats fields."""
     stdout = run([binary, "render", scene, "--output", output, "--quiet", "--stats",
                   "--samples", str(spp), "--resolution", str(resolution), "--seed", str(seed),
-                  "--threads", str(threads), "--bounces", "31", "--clamp", "0"] + args +
-                 (["--checkpoints"] if checkpoints else []))
-    rows = [parse_fields(line) for line in stdout.splitlines() if line.startswith("checkpoint")]
+                  "--threads", str(threads), "--bounces", "31", "--clamp", "0"] + args)
     stats = [parse_fields(line) for line in stdout.splitlines() if line.startswith("stats")]
-    return stats[0], rows
+    return stats[0]
 
 
 def reference(binary, tag, name, scene, resolution, spp, seeds, threads, cache):
@@ -202,12 +202,14 @@ def main():
                 continue
             times = {spp: [] for spp in CHECKPOINTS}
             output = os.path.join(cache, f"{name}-{variant}-{hashes[tag]}-{resolution}.pfm")
+            # One render per sample count (not checkpoints of the longest):
+            # adaptive sampling plans its rates, and whether to use them, for
+            # the render's sample count.
             for r in range(args.headline_runs if variant in HEADLINE else args.runs):
-                _, points = render(binaries[tag], scene, output, CHECKPOINTS[-1], resolution, 1,
-                                   args.threads, flags, checkpoints=True)
-                for point in points:
-                    if int(point["spp"]) in times:
-                        times[int(point["spp"])].append(point["cpu_seconds"])
+                for spp in CHECKPOINTS:
+                    stats = render(binaries[tag], scene, output[:-4] + f"-{spp:05d}spp.pfm", spp,
+                                   resolution, 1, args.threads, flags)
+                    times[spp].append(stats["render_cpu"])
             for spp in CHECKPOINTS:
                 checkpoint = output[:-4] + f"-{spp:05d}spp.pfm"
                 mse = variant_mse(checkpoint, truth, truth_noise)
