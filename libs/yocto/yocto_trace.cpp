@@ -694,7 +694,9 @@ static void parallel_chunks(int64_t size, int64_t grain, int threads, Func&& fun
 // threshold), with a threshold of 0.5 (between the extremes of the benchmark
 // scenes); the spread of the two sets' means gives V as the render's
 // stratified numbers make it. The tails are those of the pilot's own
-// roulette, each weighted by the inverse of its survival probability.
+// roulette, each weighted by the inverse of its survival probability. The
+// 16 paths of a grid pixel also give its variance and rays per path, for the
+// gain of adaptive sampling (see trace_pilot).
 trace_pilot run_trace_pilot(const scene_data& scene, const scene_bvh& bvh,
     const trace_context& context, const trace_params& params) {
   auto size   = camera_resolution(scene.cameras[params.camera], params.resolution);
@@ -806,7 +808,6 @@ float estimate_roulette_threshold(const scene_data& scene, const scene_bvh& bvh,
     const trace_context& context, const trace_params& params) {
   return run_trace_pilot(scene, bvh, context, params).roulette_threshold;
 }
-
 
 // The pilot of adaptive sampling (see the header): 2 paths a pixel, the
 // variance of their mean over channels and their rays, averaged over a
