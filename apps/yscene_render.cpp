@@ -502,7 +502,7 @@ static int render_scene(const render_options& options, trace_params params,
         (long long)bvh.build_peak_memory, pieces, state.width,
         state.height, state.samples, render_time, render_cpu, (long long)state.rays.load(),
         (long long)peak_memory(), (long long)state.clamped.load(),
-        clamped_energy_fraction(state), state.roulette_threshold, state.adaptive ? 1 : 0,
+        clamped_energy_fraction(state), state.roulette_threshold, state.rates.empty() ? 0 : 1,
         state.adaptive_gain);
   }
   return 0;

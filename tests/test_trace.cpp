@@ -867,7 +867,6 @@ TEST(trace, automatic_adaptive_sampling_follows_the_pilots_gain) {
     init_trace_state(state, scene, params);
     trace_samples(state, scene, bvh, context, params, 1);
     EXPECT_EQ(state.adaptive_gain, pilot.adaptive_gain);
-    EXPECT_EQ(state.adaptive, uneven);
     EXPECT_EQ(state.rates.empty(), !uneven);
   }
   EXPECT_GT(gains[0], 1.7f);

@@ -660,7 +660,6 @@ void init_trace_state(trace_state& state, const scene_data& scene, const trace_p
   state.nonfinite = 0;
   state.roulette_threshold = 0;
   state.adaptive_gain      = 0;
-  state.adaptive           = false;
   state.rates.clear();
 }
 
@@ -1012,16 +1011,17 @@ static void trace_rows(trace_state& state, const scene_data& scene, const scene_
 static void init_roulette_threshold(trace_state& state, const scene_data& scene,
     const scene_bvh& bvh, const trace_context& context, const trace_params& params) {
   if (state.roulette_threshold > 0) return;
-  // The pilot when the threshold or the choice of adaptive sampling needs it.
+  // The pilot when the threshold or the choice of adaptive sampling needs it
+  // (a render of more samples than the automatic choice allows needs no gain).
   auto pilot = trace_pilot{};
-  if (params.roulette_threshold <= 0 || params.adaptive == trace_adaptive_type::automatic) {
+  if (params.roulette_threshold <= 0 || (params.adaptive == trace_adaptive_type::automatic &&
+                                            may_use_adaptive_sampling(params))) {
     pilot               = run_trace_pilot(scene, bvh, context, params);
     state.adaptive_gain = pilot.adaptive_gain;
   }
   state.roulette_threshold = params.roulette_threshold > 0 ? params.roulette_threshold
                                                            : pilot.roulette_threshold;
-  state.adaptive = use_adaptive_sampling(params, pilot.adaptive_gain);
-  if (state.adaptive)
+  if (use_adaptive_sampling(params, pilot.adaptive_gain))
     state.rates = estimate_sample_rates(scene, bvh, context, params, state.roulette_threshold);
 }
 

@@ -150,10 +150,8 @@ struct trace_state {
   std::vector<double>        row_energy     = {};
   std::vector<double>        row_clamped    = {};
   float                      roulette_threshold = 0;  // the render's, 0 until set
-  // The pilot's predicted gain of adaptive sampling (0 if no pilot ran) and
-  // whether the render samples adaptively (set with the threshold).
+  // The pilot's predicted gain of adaptive sampling (0 if no pilot ran).
   float                      adaptive_gain = 0;
-  bool                       adaptive      = false;
   // Paths per sample of each pixel with adaptive sampling (empty until set,
   // and without it): an integer m >= 1 (m paths, each weighing 1 / m), or 1 / q
   // for q a power of two (one path every q samples, weighing q).

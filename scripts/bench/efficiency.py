@@ -201,18 +201,18 @@ def main():
             if variant not in args.variants:
                 continue
             times = {spp: [] for spp in CHECKPOINTS}
-            output = os.path.join(cache, f"{name}-{variant}-{hashes[tag]}-{resolution}.pfm")
+            outputs = {spp: os.path.join(cache, f"{name}-{variant}-{hashes[tag]}-{resolution}-"
+                                         f"{spp:05d}spp.pfm") for spp in CHECKPOINTS}
             # One render per sample count (not checkpoints of the longest):
             # adaptive sampling plans its rates, and whether to use them, for
             # the render's sample count.
             for r in range(args.headline_runs if variant in HEADLINE else args.runs):
                 for spp in CHECKPOINTS:
-                    stats = render(binaries[tag], scene, output[:-4] + f"-{spp:05d}spp.pfm", spp,
-                                   resolution, 1, args.threads, flags)
+                    stats = render(binaries[tag], scene, outputs[spp], spp, resolution, 1,
+                                   args.threads, flags)
                     times[spp].append(stats["render_cpu"])
             for spp in CHECKPOINTS:
-                checkpoint = output[:-4] + f"-{spp:05d}spp.pfm"
-                mse = variant_mse(checkpoint, truth, truth_noise)
+                mse = variant_mse(outputs[spp], truth, truth_noise)
                 cpu = statistics.median(times[spp])
                 rows.append({"scene": name, "variant": variant, "spp": spp, "mse": mse,
                              "cpu_seconds": cpu, "cpu_per_spp": cpu / spp,
