@@ -497,13 +497,13 @@ static int render_scene(const render_options& options, trace_params params,
     std::printf("stats load_seconds=%.6f bvh_seconds=%.6f bvh_bytes=%lld segments=%zu "
                 "bvh_build_peak_bytes=%lld curve_pieces=%zu width=%d height=%d spp=%d "
                 "render_seconds=%.6f render_cpu=%.6f rays=%lld peak_memory=%lld clamped=%lld "
-                "clamped_energy=%.6g roulette_threshold=%.6g adaptive=%d adaptive_gain=%.4g\n",
+                "clamped_energy=%.6g roulette_threshold=%.6g adaptive=%d adaptive_gain=%.4g split=%d\n",
         load_time, bvh.build_seconds, (long long)bvh.peak_memory, segments,
         (long long)bvh.build_peak_memory, pieces, state.width,
         state.height, state.samples, render_time, render_cpu, (long long)state.rays.load(),
         (long long)peak_memory(), (long long)state.clamped.load(),
         clamped_energy_fraction(state), state.roulette_threshold, state.rates.empty() ? 0 : 1,
-        state.adaptive_gain);
+        state.adaptive_gain, state.split);
   }
   return 0;
 } catch (const std::bad_alloc&) {
@@ -552,7 +552,9 @@ CLI::App* add_render_command(CLI::App& app, render_command& command, std::string
       [&params] { params.adaptive = trace_adaptive_type::off; },
       "no adaptive sampling: every pixel one path a sample");
   render->add_option("--split", params.split,
-          "paths per camera ray, sharing its first hit");
+          "paths per camera ray, sharing its first hit (0 = automatic: 2 where the render "
+          "samples adaptively and samples no light, else 1)")
+      ->check(CLI::Range(0, 1024));
   render->add_option("--shadow-threshold", params.shadow_threshold,
           "light samples that would add less than this play a roulette for their shadow ray")
       ->check(CLI::NonNegativeNumber);

@@ -28,6 +28,7 @@ struct test_render {
   std::vector<fixed_sum3> sums      = {};
   float                   roulette_threshold = 0;  // the one the render used
   std::vector<float>      rates     = {};           // adaptive rates (empty: uniform)
+  int                     split     = 0;            // paths per camera ray
 };
 
 // Renders samples first ... first + count - 1 (count < 0: params.samples).
@@ -42,7 +43,7 @@ static test_render render_scene(const scene_data& scene, const trace_params& par
   init_trace_state(state, scene, params, first);
   trace_samples(state, scene, bvh, context, params, count < 0 ? params.samples : count);
   return {get_image(state), state.rays.load(), state.nonfinite.load(), state.sums,
-      state.roulette_threshold, state.rates};
+      state.roulette_threshold, state.rates, state.split};
 }
 
 static double image_mean(const texture_data& image) {
@@ -694,11 +695,11 @@ TEST(trace, split_is_checked) {
   auto scene  = make_hair_test_scene();
   auto params = trace_params{};
   auto error  = std::string{};
-  for (auto split : {1, 2, 1024}) {
+  for (auto split : {0, 1, 2, 1024}) {
     params.split = split;
     EXPECT_TRUE(check_trace_params(scene, params, error)) << split << ": " << error;
   }
-  for (auto split : {0, -1, 1025, 2000}) {
+  for (auto split : {-1, 1025, 2000}) {
     params.split = split;
     error        = "";
     EXPECT_FALSE(check_trace_params(scene, params, error)) << split;
@@ -759,6 +760,7 @@ TEST(trace, adaptive_sampling_keeps_the_mean_and_spends_where_the_noise_is) {
   params.samples    = 128;
   params.seed       = 23;
   params.roulette_threshold = 0.5f;
+  params.split      = 1;  // adaptive sampling alone
   auto uniform_state = render_scene(scene, params);
   params.adaptive    = trace_adaptive_type::on;
   auto adaptive_state = render_scene(scene, params);
@@ -789,6 +791,7 @@ TEST(trace, adaptive_sampling_lowers_the_error_for_its_rays) {
   params.samples    = 2048;
   params.seed       = 1000;
   params.roulette_threshold = 0.5f;
+  params.split      = 1;  // adaptive sampling alone
   auto reference    = render_scene(scene, params).image;
   params.samples    = 64;
   auto uniform = 0.0, adaptive = 0.0;
@@ -918,18 +921,54 @@ TEST(trace, adaptive_renders_do_not_depend_on_threads) {
 
 TEST(trace, adaptive_sample_numbers_are_checked) {
   // Up to 16 paths a sample, numbered in 32 bits: samples x split x 16 must
-  // stay within 2^32.
+  // stay within 2^32 (the automatic split counts as 2).
   auto scene      = make_hair_test_scene();
   auto params     = trace_params{};
   auto error      = std::string{};
   params.adaptive = trace_adaptive_type::on;
+  params.split    = 1;
   params.samples  = 1 << 28;
   EXPECT_TRUE(check_trace_params(scene, params, error)) << error;
   params.samples = (1 << 28) + 1;
   EXPECT_FALSE(check_trace_params(scene, params, error));
   EXPECT_NE(error.find("adaptive"), std::string::npos) << error;
+  params.split   = 0;
+  params.samples = 1 << 27;
+  EXPECT_TRUE(check_trace_params(scene, params, error)) << error;
+  params.samples = (1 << 27) + 1;
+  EXPECT_FALSE(check_trace_params(scene, params, error));
   params.adaptive = trace_adaptive_type::off;
   EXPECT_TRUE(check_trace_params(scene, params, error)) << error;
+}
+
+TEST(trace, automatic_split_follows_adaptive_sampling_and_lights) {
+  // The rule: a split that is set is kept; automatic, 2 paths per camera ray
+  // where the render samples adaptively and samples no light, else 1.
+  auto params  = trace_params{};
+  params.split = 3;
+  EXPECT_EQ(choose_path_split(params, false, true), 3);
+  EXPECT_EQ(choose_path_split(params, true, false), 3);
+  params.split = 0;
+  EXPECT_EQ(choose_path_split(params, true, false), 2);
+  EXPECT_EQ(choose_path_split(params, true, true), 1);
+  EXPECT_EQ(choose_path_split(params, false, false), 1);
+  EXPECT_EQ(choose_path_split(params, false, true), 1);
+  // A render: the hair scene under its constant sky (no light to sample),
+  // 32x32 at 16 spp, takes 2 paths per camera ray with adaptive sampling
+  // and 1 without; an automatic split renders the same bits as that split set.
+  auto scene        = make_hair_test_scene();
+  params.resolution = 32;
+  params.samples    = 16;
+  params.adaptive   = trace_adaptive_type::on;
+  auto automatic    = render_scene(scene, params);
+  EXPECT_EQ(automatic.split, 2);
+  params.split = 2;
+  auto set     = render_scene(scene, params);
+  EXPECT_EQ(set.split, 2);
+  EXPECT_TRUE(set.sums == automatic.sums);
+  params.split    = 0;
+  params.adaptive = trace_adaptive_type::off;
+  EXPECT_EQ(render_scene(scene, params).split, 1);
 }
 
 TEST(trace, hair_lobe_weights_render_like_mixture_weights) {

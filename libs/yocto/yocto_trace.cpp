@@ -555,6 +555,11 @@ bool use_adaptive_sampling(const trace_params& params, float adaptive_gain) {
   return params.samples <= adaptive_auto_max_samples && adaptive_gain >= adaptive_auto_min_gain;
 }
 
+int choose_path_split(const trace_params& params, bool adaptive, bool samples_lights) {
+  if (params.split > 0) return params.split;
+  return adaptive && !samples_lights ? 2 : 1;
+}
+
 // Whether the render may sample adaptively, before its pilot says.
 static bool may_use_adaptive_sampling(const trace_params& params) {
   return use_adaptive_sampling(params, std::numeric_limits<float>::max());
@@ -569,14 +574,16 @@ bool check_trace_params(const scene_data& scene, const trace_params& params,
     return error = "resolution must be in [1, 65536]", false;
   if (params.samples < 1) return error = "samples must be at least 1", false;
   if (params.bounces < 1) return error = "bounces must be at least 1", false;
-  if (params.split < 1 || params.split > 1024)
-    return error = "split must be in [1, 1024]", false;
-  // Split paths number their samples sample * split + k in 32 bits.
-  if ((int64_t)params.samples * params.split > ((int64_t)1 << 32))
+  if (params.split < 0 || params.split > 1024)
+    return error = "split must be 0 (automatic) or in [1, 1024]", false;
+  // Split paths number their samples sample * split + k in 32 bits (the
+  // automatic choice is at most 2).
+  auto split = params.split > 0 ? params.split : 2;
+  if ((int64_t)params.samples * split > ((int64_t)1 << 32))
     return error = "samples times split must stay below 2^32", false;
   // Adaptive pixels take up to 16 paths a sample, numbered in 32 bits too.
   if (may_use_adaptive_sampling(params) &&
-      (int64_t)params.samples * params.split * adaptive_max_paths > ((int64_t)1 << 32))
+      (int64_t)params.samples * split * adaptive_max_paths > ((int64_t)1 << 32))
     return error = "samples times split times 16 must stay below 2^32 with adaptive sampling",
            false;
   if (!(params.roulette_threshold >= 0) || !std::isfinite(params.roulette_threshold))
@@ -661,6 +668,7 @@ void init_trace_state(trace_state& state, const scene_data& scene, const trace_p
   state.roulette_threshold = 0;
   state.adaptive_gain      = 0;
   state.rates.clear();
+  state.split = 0;
 }
 
 // Runs f(begin, end) over [0, size) in chunks on `threads` threads (0 for
@@ -922,11 +930,15 @@ static void trace_rows(trace_state& state, const scene_data& scene, const scene_
     const trace_context& context, const trace_params& params, int count,
     std::vector<std::vector<trace_ray>>* records) {
   auto& camera     = scene.cameras[params.camera];
+  // The paths take the render's split (params.split may leave it open).
+  auto split_params  = params;
+  split_params.split = std::max(state.split, 1);
   auto  render_row = [&](int j) {
     auto rays = (int64_t)0, nonfinite = (int64_t)0, clamped = (int64_t)0;
     auto energy = 0.0, clamped_energy = 0.0;
     auto record = records ? &(*records)[j] : nullptr;
-    auto walk   = trace_walk{scene, bvh, context, params, state.roulette_threshold, rays, record};
+    auto walk   = trace_walk{
+        scene, bvh, context, split_params, state.roulette_threshold, rays, record};
     for (auto i = 0; i < state.width; i++) {
       auto pixel = j * state.width + i;
       auto& sum  = state.sums[pixel];
@@ -1023,6 +1035,8 @@ static void init_roulette_threshold(trace_state& state, const scene_data& scene,
                                                            : pilot.roulette_threshold;
   if (use_adaptive_sampling(params, pilot.adaptive_gain))
     state.rates = estimate_sample_rates(scene, bvh, context, params, state.roulette_threshold);
+  state.split = choose_path_split(params, !state.rates.empty(),
+      params.sampler == trace_sampler_type::path && !context.lights.empty());
 }
 
 void trace_samples(trace_state& state, const scene_data& scene, const scene_bvh& bvh,

@@ -69,8 +69,9 @@ struct trace_params {
   // Paths whose throughput falls below this play the roulette; 0 for the
   // render's own, estimated by a pilot (estimate_roulette_threshold).
   float              roulette_threshold = 0;
-  // Paths per camera ray, sharing its hit (splitting at the first vertex).
-  int                split      = 1;
+  // Paths per camera ray, sharing its hit (splitting at the first vertex);
+  // 0 for the render's own choice (see choose_path_split).
+  int                split      = 0;
   // Adaptive sampling: a pilot measures each pixel's variance and cost, and
   // the pixel takes that many more or fewer paths per sample (see
   // estimate_sample_rates); off: every pixel one path per sample.
@@ -152,6 +153,8 @@ struct trace_state {
   float                      roulette_threshold = 0;  // the render's, 0 until set
   // The pilot's predicted gain of adaptive sampling (0 if no pilot ran).
   float                      adaptive_gain = 0;
+  // Paths per camera ray: params.split or the render's choice (0 until set).
+  int                        split = 0;
   // Paths per sample of each pixel with adaptive sampling (empty until set,
   // and without it): an integer m >= 1 (m paths, each weighing 1 / m), or 1 / q
   // for q a power of two (one path every q samples, weighing q).
@@ -199,6 +202,16 @@ trace_pilot run_trace_pilot(const scene_data& scene, const scene_bvh& bvh,
 // Sobol's stratification of their fibre edges takes away: the pilot's
 // independent paths do not see it); at 16 and 64 it gained up to 37%.
 bool use_adaptive_sampling(const trace_params& params, float adaptive_gain);
+
+// Paths per camera ray: params.split if set; else 2 where the render samples
+// adaptively and samples no light (a constant sky), 1 elsewhere. Measured
+// (docs/RESULTS.md): adaptive sampling gives the pixels whose error is in the
+// paths after the first hit more samples, whose stratified camera numbers
+// leave little of that error to the camera, so a second path per camera ray
+// gains 15-22% in efficiency on the hair balls and the fur ball, while
+// without adaptive sampling it loses 10-15% there; where lights are sampled,
+// it lost 17% on the hair locks (every path repeats the light sample).
+int choose_path_split(const trace_params& params, bool adaptive, bool samples_lights);
 
 // Paths per sample of every pixel for adaptive sampling, proportional to the
 // pixel's standard deviation over the square root of its cost (the
