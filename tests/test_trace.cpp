@@ -828,11 +828,19 @@ static scene_data make_glossy_wall_scene(float size) {
 
 TEST(trace, automatic_adaptive_sampling_follows_the_pilots_gain) {
   // The rule: on and off always; automatic from a predicted gain of 1.7 at
-  // up to 64 spp.
+  // up to 64 spp, 1.4 where the automatic split comes with it (no light
+  // sampled, split not 1).
   auto params     = trace_params{};
   params.samples  = 64;
   EXPECT_TRUE(use_adaptive_sampling(params, 1.7f));
   EXPECT_FALSE(use_adaptive_sampling(params, 1.69f));
+  EXPECT_FALSE(use_adaptive_sampling(params, 1.69f, true));
+  EXPECT_TRUE(use_adaptive_sampling(params, 1.4f, false));
+  EXPECT_FALSE(use_adaptive_sampling(params, 1.39f, false));
+  params.split = 1;
+  EXPECT_FALSE(use_adaptive_sampling(params, 1.69f, false));
+  EXPECT_TRUE(use_adaptive_sampling(params, 1.7f, false));
+  params.split = 0;
   params.samples = 65;
   EXPECT_FALSE(use_adaptive_sampling(params, 100.0f));
   params.adaptive = trace_adaptive_type::on;
@@ -841,7 +849,8 @@ TEST(trace, automatic_adaptive_sampling_follows_the_pilots_gain) {
   params.adaptive = trace_adaptive_type::off;
   EXPECT_FALSE(use_adaptive_sampling(params, 100.0f));
   // The pilot's gain (32x32, 16 spp): a wall that fills a sixth of the frame
-  // (the sky's pixels have no variance) above 1.7; one that fills it below; the
+  // (the sky's pixels have no variance) above 1.7; one that fills it below
+  // 1.4 (a constant sky: no light sampled, so 1.4 is its limit); the
   // same bits with 1 and 2 threads. A default render of each samples
   // adaptively exactly when its gain says so, with rates only then.
   params          = trace_params{};
@@ -873,7 +882,7 @@ TEST(trace, automatic_adaptive_sampling_follows_the_pilots_gain) {
     EXPECT_EQ(state.rates.empty(), !uneven);
   }
   EXPECT_GT(gains[0], 1.7f);
-  EXPECT_LT(gains[1], 1.7f);
+  EXPECT_LT(gains[1], 1.4f);
 }
 
 TEST(trace, adaptive_images_are_unbiased_at_any_sample_count) {
@@ -1351,6 +1360,7 @@ TEST(trace, aov_depth_averages_the_hits_and_coverage_counts_hair) {
   params.samples    = 16;
   params.seed       = 3;
   params.aovs       = true;
+  params.adaptive   = trace_adaptive_type::off;  // every pixel 16 paths
   auto render       = render_aovs(scene, params);
   auto partial = 0, sphere_only = 0;
   for (auto i = 0; i < (int)render.image.pixels.size(); i++) {

@@ -546,13 +546,17 @@ namespace yocto {
 static const int adaptive_max_paths = 16;
 
 // Measured limits of the automatic choice (see the header).
-static const float adaptive_auto_min_gain    = 1.7f;
-static const int   adaptive_auto_max_samples = 64;
+static const float adaptive_auto_min_gain       = 1.7f;
+static const float adaptive_auto_min_split_gain = 1.4f;
+static const int   adaptive_auto_max_samples    = 64;
 
-bool use_adaptive_sampling(const trace_params& params, float adaptive_gain) {
+bool use_adaptive_sampling(
+    const trace_params& params, float adaptive_gain, bool samples_lights) {
   if (params.adaptive != trace_adaptive_type::automatic)
     return params.adaptive == trace_adaptive_type::on;
-  return params.samples <= adaptive_auto_max_samples && adaptive_gain >= adaptive_auto_min_gain;
+  auto with_split = !samples_lights && params.split != 1;
+  return params.samples <= adaptive_auto_max_samples &&
+         adaptive_gain >= (with_split ? adaptive_auto_min_split_gain : adaptive_auto_min_gain);
 }
 
 int choose_path_split(const trace_params& params, bool adaptive, bool samples_lights) {
@@ -1033,10 +1037,10 @@ static void init_roulette_threshold(trace_state& state, const scene_data& scene,
   }
   state.roulette_threshold = params.roulette_threshold > 0 ? params.roulette_threshold
                                                            : pilot.roulette_threshold;
-  if (use_adaptive_sampling(params, pilot.adaptive_gain))
+  auto samples_lights = params.sampler == trace_sampler_type::path && !context.lights.empty();
+  if (use_adaptive_sampling(params, pilot.adaptive_gain, samples_lights))
     state.rates = estimate_sample_rates(scene, bvh, context, params, state.roulette_threshold);
-  state.split = choose_path_split(params, !state.rates.empty(),
-      params.sampler == trace_sampler_type::path && !context.lights.empty());
+  state.split = choose_path_split(params, !state.rates.empty(), samples_lights);
 }
 
 void trace_samples(trace_state& state, const scene_data& scene, const scene_bvh& bvh,

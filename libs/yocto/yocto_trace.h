@@ -195,13 +195,17 @@ trace_pilot run_trace_pilot(const scene_data& scene, const scene_bvh& bvh,
     const trace_context& context, const trace_params& params);
 
 // Whether a render samples adaptively: `on`, never `off`; `automatic` where
-// the pilot predicts a gain of at least 1.7 and the render takes at most 64
-// samples. Both limits are measured (docs/RESULTS.md): below 1.7 (the curly
-// head, 1.3-1.6: even noise) adaptive sampling gains nothing; at 256 samples
-// it lost 6% on the fur ball and 12% on the hair locks (gains of 4-5 that
-// Sobol's stratification of their fibre edges takes away: the pilot's
-// independent paths do not see it); at 16 and 64 it gained up to 37%.
-bool use_adaptive_sampling(const trace_params& params, float adaptive_gain);
+// the pilot predicts a gain of at least 1.7 (1.4 where the automatic split
+// comes with it: no light sampled, params.split not 1) and the render takes
+// at most 64 samples. The limits are measured (docs/RESULTS.md): below 1.7
+// (the curly head, 1.3-1.6: even noise) adaptive sampling alone gains
+// nothing; with the split it gained 8.5% on the blond ball (gain 1.49,
+// where either alone gains nothing); at 256 samples it lost 6% on the fur
+// ball and 12% on the hair locks (gains of 4-5 that Sobol's stratification of
+// their fibre edges takes away: the pilot's independent paths do not see
+// it); at 16 and 64 it gained up to 37%.
+bool use_adaptive_sampling(
+    const trace_params& params, float adaptive_gain, bool samples_lights = true);
 
 // Paths per camera ray: params.split if set; else 2 where the render samples
 // adaptively and samples no light (a constant sky), 1 elsewhere. Measured

@@ -55,6 +55,7 @@ VARIANTS = [
     ("after-lights-all", "after", ["--lights", "all"]),
     ("after-whole-curves", "after", ["--curve-pieces", "1"]),
     ("after-shadow-0", "after", ["--shadow-threshold", "0"]),
+    ("after-split-1", "after", ["--split", "1"]),
     ("after-split-2", "after", ["--split", "2"]),
     ("after-no-adaptive", "after", ["--no-adaptive"]),
     ("after-adaptive", "after", ["--adaptive"]),
@@ -64,8 +65,9 @@ VARIANTS = [
 ]
 # The two defaults are timed --headline-runs times, the levers --runs times.
 HEADLINE = ["before", "after"]
-# What each lever is, as the variant that turns it back (or, for splitting,
-# the variant that turns it on: below 1, it does not pay).
+# What each lever is, as the variant that turns it back (or, for the
+# choices, the variant that always takes the other side: below 1, the
+# choice paid).
 LEVERS = [
     ("Sobol numbers (against independent ones)", "after-independent"),
     ("one global Sobol point (against shuffled Sobol pairs)", "after-sobol-pairs"),
@@ -75,7 +77,9 @@ LEVERS = [
     ("light choice: constant sky to BSDF sampling, MIS compensation", "after-lights-all"),
     ("bent curves in exact pieces", "after-whole-curves"),
     ("shadow-ray roulette", "after-shadow-0"),
-    ("no splitting at the first hit (against 2 paths per camera ray)", "after-split-2"),
+    ("2 paths per camera ray with adaptive sampling and no light sampled (against 1)",
+     "after-split-1"),
+    ("the split's choice (against 2 paths per camera ray always)", "after-split-2"),
     ("adaptive sampling where the pilot predicts a gain (against none)", "after-no-adaptive"),
     ("the pilot's choice (against adaptive sampling always)", "after-adaptive"),
 ]
