@@ -63,6 +63,12 @@ static std::vector<int8_t> make_sequence_slots(
   return slots;
 }
 
+// Whether paths sample lights: next-event estimation with MIS (the path
+// sampler) where the context has lights to sample.
+static bool paths_sample_lights(const trace_params& params, const trace_context& context) {
+  return params.sampler == trace_sampler_type::path && !context.lights.empty();
+}
+
 trace_context make_trace_context(const scene_data& scene, const trace_params& params) {
   auto context    = trace_context{};
   context.shading = make_shading_context(scene, params.hair_sampling);
@@ -140,8 +146,8 @@ trace_context make_trace_context(const scene_data& scene, const trace_params& pa
     context.lights.push_back(light);
   }
   if (params.sequence == sequence_type::global_sobol && !scene.cameras.empty())
-    context.sequence_slots = make_sequence_slots(scene, params,
-        params.sampler == trace_sampler_type::path && !context.lights.empty());
+    context.sequence_slots =
+        make_sequence_slots(scene, params, paths_sample_lights(params, context));
   return context;
 }
 
@@ -347,7 +353,7 @@ static void scatter_path(const trace_walk& walk, material_point point, ray3f ray
   auto use_mis = params.sampler == trace_sampler_type::path;
   // Next-event estimation, when there are lights to sample; MIS weighs the
   // BSDF samples that find them, so only then is a BSDF pdf needed.
-  auto samples_lights = use_mis && !context.lights.empty();
+  auto samples_lights = paths_sample_lights(params, context);
   // The lobe split: at the first hair vertex, each lobe's share of what the
   // rest of the path brings (radiance beyond `lobe_mark`).
   auto split_lobes  = false;
@@ -580,9 +586,9 @@ bool check_trace_params(const scene_data& scene, const trace_params& params,
   if (params.bounces < 1) return error = "bounces must be at least 1", false;
   if (params.split < 0 || params.split > 1024)
     return error = "split must be 0 (automatic) or in [1, 1024]", false;
-  // Split paths number their samples sample * split + k in 32 bits (the
-  // automatic choice is at most 2).
-  auto split = params.split > 0 ? params.split : 2;
+  // Split paths number their samples sample * split + k in 32 bits (for an
+  // automatic split, its largest choice: adaptive, no light sampled).
+  auto split = choose_path_split(params, true, false);
   if ((int64_t)params.samples * split > ((int64_t)1 << 32))
     return error = "samples times split must stay below 2^32", false;
   // Adaptive pixels take up to 16 paths a sample, numbered in 32 bits too.
@@ -1037,10 +1043,10 @@ static void init_roulette_threshold(trace_state& state, const scene_data& scene,
   }
   state.roulette_threshold = params.roulette_threshold > 0 ? params.roulette_threshold
                                                            : pilot.roulette_threshold;
-  auto samples_lights = params.sampler == trace_sampler_type::path && !context.lights.empty();
-  if (use_adaptive_sampling(params, pilot.adaptive_gain, samples_lights))
+  auto lights = paths_sample_lights(params, context);
+  if (use_adaptive_sampling(params, pilot.adaptive_gain, lights))
     state.rates = estimate_sample_rates(scene, bvh, context, params, state.roulette_threshold);
-  state.split = choose_path_split(params, !state.rates.empty(), samples_lights);
+  state.split = choose_path_split(params, !state.rates.empty(), lights);
 }
 
 void trace_samples(trace_state& state, const scene_data& scene, const scene_bvh& bvh,
