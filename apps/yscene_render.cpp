@@ -316,6 +316,8 @@ static int render_scene(const render_options& options, trace_params params,
     return print_error(error);
   if (!check_render_output(options, params, error)) return print_error(error);
   auto load_time = seconds_since(start);
+  // Fibres in Embree's layout: the BVH reads them in place (no vertex copy).
+  pack_fiber_vertices(scene);
 
   auto bvh        = scene_bvh{};
   auto bvh_params_ = bvh_params{};

@@ -837,3 +837,107 @@ TEST(geometry, curve_pieces_are_planned_from_rays_and_budget) {
   params.max_curve_pieces = 4;
   EXPECT_EQ(plan_curve_pieces(curly, params, 1e12, 1024).max_pieces, 1);
 }
+
+// A render packs its fibres (pack_fiber_vertices) so that Embree reads the
+// scene's vertices in place. Packed or not, a groom is the same scene: the
+// same fingerprint, bounds, memory and strands, and its BVH gives the same
+// hits bit for bit (unsplit and in pieces; strands sharing their vertices,
+// lines, and segments with a vertex copy each, which Embree still copies),
+// for 3,000 rays; unsplit strands' BVH holds no copy of their vertices.
+TEST(bvh, packed_fibres_hit_and_shade_like_unpacked_ones) {
+  auto style    = hair_style_params{};
+  style.strands = 300;
+  style.style   = hair_style::curly;
+  auto groom    = make_hair_scene(style, hair_material{});
+  auto hair     = -1;
+  for (auto i = 0; i < (int)groom.shapes.size(); i++)
+    if (!groom.shapes[i].curves.empty()) hair = i;
+  ASSERT_GE(hair, 0);
+  auto kinds = std::vector<std::pair<std::string, scene_data>>{{"strands", groom}};
+  kinds.push_back({"lines", groom});
+  kinds.back().second.shapes[hair] = curves_to_lines(groom.shapes[hair], 3);
+  // A vertex copy per segment: elements no longer consecutive.
+  kinds.push_back({"copied", groom});
+  auto& copied = kinds.back().second.shapes[hair];
+  copied       = {};
+  for (auto& c : groom.shapes[hair].curves) {
+    auto base = (int)copied.positions.size();
+    for (auto k = 0; k < 4; k++) {
+      copied.positions.push_back(groom.shapes[hair].positions[c[k]]);
+      copied.radius.push_back(groom.shapes[hair].radius[c[k]]);
+    }
+    copied.curves.push_back({base, base + 1, base + 2, base + 3});
+  }
+  auto bounds = compute_bounds(groom);
+  for (auto& [kind, scene] : kinds) {
+    auto packed = scene;
+    pack_fiber_vertices(packed);
+    auto& shape = scene.shapes[hair];
+    auto& fibre = packed.shapes[hair];
+    EXPECT_TRUE(fibre.positions.empty() && fibre.radius.empty()) << kind;
+    ASSERT_EQ(fibre.fiber_vertices.size(), shape.positions.size()) << kind;
+    for (auto i = 0; i < num_vertices(shape); i++) {
+      EXPECT_EQ(vertex_position(fibre, i), shape.positions[i]) << kind;
+      EXPECT_EQ(vertex_radius(fibre, i), shape.radius[i]) << kind;
+    }
+    EXPECT_EQ(fingerprint_scene(packed), fingerprint_scene(scene)) << kind;
+    EXPECT_EQ(shape_memory(fibre), shape_memory(shape)) << kind;
+    auto a = compute_bounds(scene), b = compute_bounds(packed);
+    EXPECT_TRUE(a.min == b.min && a.max == b.max) << kind;
+    auto strands = make_fiber_strands(shape), packed_strands = make_fiber_strands(fibre);
+    EXPECT_EQ(strands.strand, packed_strands.strand) << kind;
+    EXPECT_EQ(strands.u, packed_strands.u) << kind;
+    EXPECT_EQ(strands.random, packed_strands.random) << kind;
+    // Packing twice, or a triangle shape, changes nothing.
+    auto again = packed;
+    pack_fiber_vertices(again);
+    EXPECT_EQ(again.shapes[hair].fiber_vertices, fibre.fiber_vertices) << kind;
+    for (auto i = 0; i < (int)packed.shapes.size(); i++)
+      if (i != hair) EXPECT_TRUE(packed.shapes[i].fiber_vertices.empty()) << kind;
+
+    for (auto pieces : {1, 4}) {
+      auto params             = bvh_params{};
+      params.max_curve_pieces = pieces;
+      // One build thread: Embree's per-thread blocks make its bytes vary.
+      params.embree_config = "threads=1";
+      auto bvh = scene_bvh{}, packed_bvh = scene_bvh{};
+      auto error = std::string{};
+      ASSERT_TRUE(make_scene_bvh(bvh, scene, params, error)) << error;
+      ASSERT_TRUE(make_scene_bvh(packed_bvh, packed, params, error)) << error;
+      auto what = kind + " pieces " + std::to_string(pieces);
+      if (kind != "copied" && bvh.pieces[hair].pieces.empty()) {
+        // Embree reads the packed strands in place: no float4 copy.
+        auto copy = (double)sizeof(vec4f) * num_vertices(shape);
+        EXPECT_GE((double)(bvh.peak_memory - packed_bvh.peak_memory), 0.99 * copy) << what;
+      }
+      // Rays from a sphere around the groom to points within its bounds.
+      auto rng  = make_rng(17);
+      auto hits = 0;
+      for (auto r = 0; r < 3000; r++) {
+        auto target = bounds.min + (bounds.max - bounds.min) * rand3f(rng);
+        auto from   = sample_sphere(rand2f(rng)) * 2.0f * length(bounds.max - bounds.min) +
+                      center(bounds);
+        auto ray    = ray3f{from, normalize(target - from)};
+        auto x = intersect_scene_bvh(bvh, ray), y = intersect_scene_bvh(packed_bvh, ray);
+        ASSERT_EQ(x.hit, y.hit) << what;
+        EXPECT_EQ(intersect_scene_bvh_any(bvh, ray), intersect_scene_bvh_any(packed_bvh, ray))
+            << what;
+        if (!x.hit) continue;
+        EXPECT_EQ(x.instance, y.instance) << what;
+        EXPECT_EQ(x.element, y.element) << what;
+        EXPECT_EQ(x.uv, y.uv) << what;
+        EXPECT_EQ(x.distance, y.distance) << what;
+        auto& instance = scene.instances[x.instance];
+        if (instance.shape != hair) continue;
+        hits++;
+        auto p = eval_fiber_point(scene, instance, x.element, x.uv.x, ray, x.distance);
+        auto q = eval_fiber_point(packed, instance, y.element, y.uv.x, ray, y.distance);
+        EXPECT_EQ(p.axis, q.axis) << what;
+        EXPECT_EQ(p.tangent, q.tangent) << what;
+        EXPECT_EQ(p.radius, q.radius) << what;
+        EXPECT_EQ(p.h, q.h) << what;
+      }
+      EXPECT_GT(hits, 100) << what;
+    }
+  }
+}

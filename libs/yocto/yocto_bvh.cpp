@@ -87,29 +87,30 @@ struct fiber_end {
   vec3f outward = {0, 0, 0};
 };
 static fiber_end eval_fiber_end(const shape_data& shape, int element, int end) {
-  auto& p = shape.positions;
+  auto p = [&](int i) { return vertex_position(shape, i); };
   if (!shape.lines.empty()) {
     auto& line = shape.lines[element];
-    return end ? fiber_end{line.y, p[line.y] - p[line.x]}
-               : fiber_end{line.x, p[line.x] - p[line.y]};
+    return end ? fiber_end{line.y, p(line.y) - p(line.x)}
+               : fiber_end{line.x, p(line.x) - p(line.y)};
   }
   auto& curve   = shape.curves[element];
-  auto  outward = end ? p[curve.w] - p[curve.z] : p[curve.x] - p[curve.y];
-  if (length(outward) == 0) outward = end ? p[curve.w] - p[curve.x] : p[curve.x] - p[curve.w];
+  auto  outward = end ? p(curve.w) - p(curve.z) : p(curve.x) - p(curve.y);
+  if (length(outward) == 0) outward = end ? p(curve.w) - p(curve.x) : p(curve.x) - p(curve.w);
   return {end ? curve.w : curve.x, outward};
 }
 
 // Vertices as Embree's float4 (position, radius).
 static vec4f fiber_vertex(const shape_data& shape, int index) {
+  if (!shape.fiber_vertices.empty()) return shape.fiber_vertices[index];
   auto r = index < (int)shape.radius.size() ? shape.radius[index] : 0.001f;
   return {shape.positions[index], r};
 }
 
-// Do all of an element's vertex indices fall within the shape's positions?
+// Do all of an element's vertex indices fall within the shape's vertices?
 template <typename Element>
 static bool element_in_range(const shape_data& shape, const Element& element) {
   for (auto k = 0; k < (int)element.length(); k++)
-    if (element[k] < 0 || element[k] >= (int)shape.positions.size()) return false;
+    if (element[k] < 0 || element[k] >= num_vertices(shape)) return false;
   return true;
 }
 
@@ -131,14 +132,23 @@ static RTCGeometry make_curve_geometry(
   auto geometry  = rtcNewGeometry(device, type);
   auto degree    = (int)Element::length();
   auto shared    = elements_are_consecutive(elements);
-  auto nvertices = shared ? shape.positions.size() : elements.size() * degree;
-  auto vertices  = (vec4f*)rtcSetNewGeometryBuffer(geometry, RTC_BUFFER_TYPE_VERTEX, 0,
-      RTC_FORMAT_FLOAT4, sizeof(vec4f), nvertices);
-  if (!vertices) return release_unbuilt(geometry);
+  auto nvertices = shared ? (size_t)num_vertices(shape) : elements.size() * degree;
+  // Packed vertices of a strand are Embree's layout: read in place.
+  auto in_place = shared && !shape.fiber_vertices.empty();
+  auto vertices = (vec4f*)nullptr;
+  if (in_place) {
+    rtcSetSharedGeometryBuffer(geometry, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT4,
+        shape.fiber_vertices.data(), 0, sizeof(vec4f), nvertices);
+  } else {
+    vertices = (vec4f*)rtcSetNewGeometryBuffer(geometry, RTC_BUFFER_TYPE_VERTEX, 0,
+        RTC_FORMAT_FLOAT4, sizeof(vec4f), nvertices);
+    if (!vertices) return release_unbuilt(geometry);
+  }
   if (shared) {
     // The first index of each element is its index buffer: the scene's own
     // memory, read in place (13 MB not copied for 3.3M segments).
-    for (auto i = 0; i < (int)nvertices; i++) vertices[i] = fiber_vertex(shape, i);
+    if (!in_place)
+      for (auto i = 0; i < (int)nvertices; i++) vertices[i] = fiber_vertex(shape, i);
     rtcSetSharedGeometryBuffer(geometry, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT,
         elements.data(), 0, sizeof(Element), elements.size());
   } else {
@@ -172,17 +182,16 @@ static RTCGeometry make_curve_geometry(
 // 0 for a straight segment or one with indices out of range.
 static float segment_bend_ratio(const shape_data& shape, const vec4i& c) {
   if (!element_in_range(shape, c)) return 0;
-  auto& p     = shape.positions;
-  auto  chord = p[c.w] - p[c.x];
-  auto  along = dot(chord, chord) > 0 ? normalize(chord) : vec3f{0, 0, 0};
-  auto  off   = [&](const vec3f& q) {
-    auto d = q - p[c.x];
+  auto p      = [&](int i) { return vertex_position(shape, i); };
+  auto chord  = p(c.w) - p(c.x);
+  auto along  = dot(chord, chord) > 0 ? normalize(chord) : vec3f{0, 0, 0};
+  auto off    = [&](const vec3f& q) {
+    auto d = q - p(c.x);
     return length(d - dot(d, along) * along);
   };
-  auto bend   = std::max(off(p[c.y]), off(p[c.z]));
+  auto bend   = std::max(off(p(c.y)), off(p(c.z)));
   auto radius = 0.0f;
-  for (auto k = 0; k < 4; k++)
-    radius = std::max(radius, c[k] < (int)shape.radius.size() ? shape.radius[c[k]] : 0.001f);
+  for (auto k = 0; k < 4; k++) radius = std::max(radius, fiber_vertex(shape, c[k]).w);
   auto ratio = radius > 0 ? bend / (2 * radius) : 0.0f;
   return std::isfinite(ratio) ? ratio : 0.0f;
 }
@@ -280,7 +289,6 @@ static RTCGeometry make_curve_pieces_geometry(RTCDevice device, const shape_data
 static std::vector<uint32_t> make_fiber_caps(const shape_data& shape) {
   auto caps     = std::vector<uint32_t>{};
   auto add_caps = [&](const auto& elements) {
-    auto& p = shape.positions;
     if (elements.empty() || elements.size() >= (1u << 31)) return;
     auto valid = [&](const auto& element) { return element_in_range(shape, element); };
     // Every segment end with its position's bits (+0 for -0). An end on the
@@ -293,7 +301,7 @@ static std::vector<uint32_t> make_fiber_caps(const shape_data& shape) {
     };
     auto last = (int)elements[0].length() - 1;
     auto bits = [&](int vertex) {
-      auto position = p[vertex] + vec3f{0, 0, 0};
+      auto position = vertex_position(shape, vertex) + vec3f{0, 0, 0};
       auto result   = std::array<uint32_t, 3>{};
       std::memcpy(result.data(), &position, sizeof(result));
       return result;
@@ -645,8 +653,9 @@ bvh_piece_plan plan_curve_pieces(const scene_data& scene, const bvh_params& para
     auto& shape = scene.shapes[i];
     if (!used[i]) continue;
     auto elements = shape.curves.size() + shape.lines.size() + shape.triangles.size();
-    plan.bytes += per_curve * elements + sizeof(vec4f) * shape.positions.size() +
-                  sizeof(uint32_t) * elements;
+    // Packed strands' vertices are read in place; others are copied.
+    auto copied = shape.fiber_vertices.empty() ? shape.positions.size() : 0;
+    plan.bytes += per_curve * elements + sizeof(vec4f) * copied + sizeof(uint32_t) * elements;
     plan.segments += (int64_t)shape.curves.size();
   }
   plan.pieces = plan.segments;

@@ -247,13 +247,18 @@ inline void hash_word(hash_stream& stream, uint64_t word) {
   stream.hash ^= word;
   stream.hash = ((stream.hash << 27) | (stream.hash >> 37)) * 5 + 0x52dce729;
 }
-inline void hash_bytes(hash_stream& stream, const void* data, size_t size) {
+// The bytes as 8-byte words (the last zero-padded), without their count:
+// blocks of whole words hash as the array they make up.
+inline void hash_words(hash_stream& stream, const void* data, size_t size) {
   auto bytes = (const unsigned char*)data;
   for (size_t i = 0; i < size; i += 8) {
     auto word = (uint64_t)0;
     std::memcpy(&word, bytes + i, std::min(size - i, (size_t)8));
     hash_word(stream, word);
   }
+}
+inline void hash_bytes(hash_stream& stream, const void* data, size_t size) {
+  hash_words(stream, data, size);
   hash_word(stream, size);
 }
 

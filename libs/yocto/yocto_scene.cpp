@@ -231,7 +231,8 @@ double shape_memory(const shape_data& shape) {
          (double)shape.normals.size() * sizeof(vec3f) +
          (double)shape.texcoords.size() * sizeof(vec2f) +
          (double)shape.radius.size() * sizeof(float) +
-         (double)shape.colors.size() * sizeof(vec3f);
+         (double)shape.colors.size() * sizeof(vec3f) +
+         (double)shape.fiber_vertices.size() * sizeof(vec4f);
 }
 
 // Scene values into a hash_stream.
@@ -248,6 +249,23 @@ struct scene_hasher {
     (add_bytes(&values, sizeof(values)), ...);
   }
   void add(const frame3f& frame) { add_values(frame.x, frame.y, frame.z, frame.o); }
+  // The first three floats of each vertex (3) or the last (1), hashed as
+  // hash_bytes hashes an array of them: its words, then its size. Unpacked
+  // a block at a time (4096 vertices: whole words).
+  void add_packed(const std::vector<vec4f>& vertices, int channels) {
+    auto values = std::vector<float>{};
+    auto block  = size_t{4096};
+    for (size_t first = 0; first < vertices.size(); first += block) {
+      values.clear();
+      for (auto i = first; i < std::min(first + block, vertices.size()); i++) {
+        auto& v = vertices[i];
+        if (channels == 3) values.insert(values.end(), {v.x, v.y, v.z});
+        else values.push_back(v.w);
+      }
+      hash_words(stream, values.data(), values.size() * sizeof(float));
+    }
+    hash_word(stream, vertices.size() * channels * sizeof(float));
+  }
   // Every hair parameter: the values in the table's order, then the has_
   // flags; first of the parameters that are not variation, then of those that
   // are, if some value or flag of them is away from its default, so that
@@ -282,10 +300,19 @@ uint64_t fingerprint_scene(const scene_data& scene) {
     hasher.add(shape.triangles);
     hasher.add(shape.lines);
     hasher.add(shape.curves);
-    hasher.add(shape.positions);
-    hasher.add(shape.normals);
-    hasher.add(shape.texcoords);
-    hasher.add(shape.radius);
+    if (shape.fiber_vertices.empty()) {
+      hasher.add(shape.positions);
+      hasher.add(shape.normals);
+      hasher.add(shape.texcoords);
+      hasher.add(shape.radius);
+    } else {
+      // A packed shape hashes as it did unpacked: its positions, normals,
+      // texcoords and radii in that order.
+      hasher.add_packed(shape.fiber_vertices, 3);
+      hasher.add(shape.normals);
+      hasher.add(shape.texcoords);
+      hasher.add_packed(shape.fiber_vertices, 1);
+    }
     // Only when present: the fingerprints of shapes without colours stay.
     if (!shape.colors.empty()) hasher.add(shape.colors);
   }
@@ -315,12 +342,28 @@ uint64_t fingerprint_scene(const scene_data& scene) {
 
 bbox3f compute_bounds(const shape_data& shape) {
   auto bounds = bbox3f{};
-  for (auto i = 0; i < (int)shape.positions.size(); i++) {
-    auto r = i < (int)shape.radius.size() ? shape.radius[i] : 0.0f;
-    bounds = merge(bounds, shape.positions[i] - r);
-    bounds = merge(bounds, shape.positions[i] + r);
+  for (auto i = 0; i < num_vertices(shape); i++) {
+    auto p = vertex_position(shape, i);
+    auto r = vertex_radius(shape, i);
+    bounds = merge(bounds, p - r);
+    bounds = merge(bounds, p + r);
   }
   return bounds;
+}
+
+void pack_fiber_vertices(shape_data& shape) {
+  if (!is_fiber(shape) || !shape.fiber_vertices.empty() ||
+      shape.radius.size() != shape.positions.size())
+    return;
+  shape.fiber_vertices.resize(shape.positions.size());
+  for (size_t i = 0; i < shape.positions.size(); i++)
+    shape.fiber_vertices[i] = {shape.positions[i], shape.radius[i]};
+  // Swapped with empty vectors: assigning {} would keep their memory.
+  std::vector<vec3f>{}.swap(shape.positions);
+  std::vector<float>{}.swap(shape.radius);
+}
+void pack_fiber_vertices(scene_data& scene) {
+  for (auto& shape : scene.shapes) pack_fiber_vertices(shape);
 }
 
 bbox3f compute_bounds(const scene_data& scene) {
@@ -662,22 +705,23 @@ surface_point eval_surface_point(const scene_data& scene, const instance_data& i
 fiber_point eval_fiber_point(const scene_data& scene, const instance_data& instance,
     int element, float u, const ray3f& ray, float distance) {
   auto& shape = scene.shapes[instance.shape];
-  auto& p     = shape.positions;
-  auto  r     = [&](int i) { return shape.radius.empty() ? 0.0f : shape.radius[i]; };
+  auto  p     = [&](int i) { return vertex_position(shape, i); };
+  auto  r     = [&](int i) { return vertex_radius(shape, i); };
   auto  axis = vec3f{0, 0, 0}, tangent = vec3f{1, 0, 0};
   auto  radius = 0.0f;
   if (!shape.lines.empty()) {
     auto line = shape.lines[element];
-    axis      = p[line.x] * (1 - u) + p[line.y] * u;
-    tangent   = p[line.y] - p[line.x];
+    axis      = p(line.x) * (1 - u) + p(line.y) * u;
+    tangent   = p(line.y) - p(line.x);
     radius    = r(line.x) * (1 - u) + r(line.y) * u;
   } else {
     auto curve = shape.curves[element];
-    axis    = eval_bezier(p[curve.x], p[curve.y], p[curve.z], p[curve.w], u);
-    tangent = eval_bezier_derivative(p[curve.x], p[curve.y], p[curve.z], p[curve.w], u);
+    auto p0 = p(curve.x), p1 = p(curve.y), p2 = p(curve.z), p3 = p(curve.w);
+    axis    = eval_bezier(p0, p1, p2, p3, u);
+    tangent = eval_bezier_derivative(p0, p1, p2, p3, u);
     radius  = eval_bezier(r(curve.x), r(curve.y), r(curve.z), r(curve.w), u);
     // A Bezier whose end control points coincide has no derivative at the end.
-    if (length(tangent) == 0) tangent = p[curve.w] - p[curve.x];
+    if (length(tangent) == 0) tangent = p3 - p0;
   }
   auto point     = fiber_point{};
   point.position = ray.o + ray.d * distance;
@@ -736,7 +780,7 @@ fiber_strands make_fiber_strands(const shape_data& shape) {
   auto end_of   = [&](int i) { return curves ? shape.curves[i].w : shape.lines[i].y; };
   // Segments by the position they start at (bits: exact matches only).
   auto key = [&](int vertex) {
-    auto& p = shape.positions[vertex];
+    auto  p = vertex_position(shape, vertex);
     auto  x = vec3f{p.x == 0 ? 0.0f : p.x, p.y == 0 ? 0.0f : p.y, p.z == 0 ? 0.0f : p.z};
     auto  bits = std::array<uint32_t, 3>{};
     std::memcpy(bits.data(), &x[0], sizeof(bits));
@@ -777,17 +821,18 @@ fiber_strands make_fiber_strands(const shape_data& shape) {
     auto total = 0.0f;
     for (auto k = first; k < (int)strands.segments.size(); k++) {
       auto i = strands.segments[k];
-      total += length(shape.positions[end_of(i)] - shape.positions[start_of(i)]);
+      total += length(vertex_position(shape, end_of(i)) - vertex_position(shape, start_of(i)));
     }
     auto run = 0.0f, n = (float)(strands.segments.size() - first);
     for (auto k = first; k < (int)strands.segments.size(); k++) {
       auto i      = strands.segments[k];
-      auto length_i = length(shape.positions[end_of(i)] - shape.positions[start_of(i)]);
+      auto length_i = length(
+          vertex_position(shape, end_of(i)) - vertex_position(shape, start_of(i)));
       strands.u[i] = total > 0 ? vec2f{run / total, (run + length_i) / total}
                                : vec2f{(k - first) / n, (k - first + 1) / n};
       run += length_i;
     }
-    strands.random.push_back(strand_random(shape.positions[start_of(root)]));
+    strands.random.push_back(strand_random(vertex_position(shape, start_of(root))));
   };
   for (auto i = 0; i < count; i++)
     if (previous[i] < 0) walk(i);
