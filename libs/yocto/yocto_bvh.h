@@ -109,7 +109,8 @@ struct scene_intersection {
 };
 
 // Builds the BVH; returns false with a message on an Embree error. The
-// index buffers of strands are the scene's own curves and lines, not copies:
+// index buffers of strands are the scene's own curves and lines, not copies,
+// and so are the vertex buffers of strands packed by pack_fiber_vertices:
 // keep the scene alive and unchanged while its BVH is used.
 bool make_scene_bvh(scene_bvh& bvh, const scene_data& scene, const bvh_params& params,
     std::string& error);
