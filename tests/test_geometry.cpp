@@ -833,6 +833,25 @@ TEST(geometry, curve_pieces_are_planned_from_rays_and_budget) {
   std::printf("[ figure ] planned pieces: %lld of %lld within %.0f bytes (built peak %lld)\n",
       (long long)half.pieces, (long long)full.pieces, budget,
       (long long)half_bvh.build_peak_memory);
+  // Packed, the same budget: unsplit strands' vertices are read in place,
+  // but split, every segment is pieces with vertices of their own, as
+  // unpacked: the same plan (the plan once left the pieces' vertices out
+  // for packed shapes, and planned more than fit).
+  auto packed = curly;
+  pack_fiber_vertices(packed);
+  params.max_curve_pieces      = 4;
+  params.curve_piece_threshold = 1;
+  auto packed_half = plan_curve_pieces(packed, params, 1e12, budget);
+  EXPECT_EQ(packed_half.pieces, half.pieces);
+  EXPECT_EQ(packed_half.threshold, half.threshold);
+  EXPECT_LE(packed_half.bytes, budget);
+  auto packed_bvh              = scene_bvh{};
+  auto error                   = std::string{};
+  params.max_curve_pieces      = packed_half.max_pieces;
+  params.curve_piece_threshold = packed_half.threshold;
+  params.max_bytes             = budget;
+  EXPECT_TRUE(make_scene_bvh(packed_bvh, packed, params, error)) << error;
+  EXPECT_LE(packed_bvh.build_peak_memory, budget);
   // A budget the unsplit BVH alone exceeds: no pieces.
   params.max_curve_pieces = 4;
   EXPECT_EQ(plan_curve_pieces(curly, params, 1e12, 1024).max_pieces, 1);

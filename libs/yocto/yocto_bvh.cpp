@@ -649,13 +649,17 @@ bvh_piece_plan plan_curve_pieces(const scene_data& scene, const bvh_params& para
   auto used = std::vector<bool>(scene.shapes.size(), false);
   for (auto& instance : scene.instances)
     if (instance.shape >= 0 && instance.shape < (int)used.size()) used[instance.shape] = true;
+  // Split, a curves shape's segments are all pieces, with vertices of their
+  // own instead of the shape's (read in place when packed, else copied).
+  auto split_bytes = 0.0;
   for (auto i = 0; i < (int)scene.shapes.size(); i++) {
     auto& shape = scene.shapes[i];
     if (!used[i]) continue;
     auto elements = shape.curves.size() + shape.lines.size() + shape.triangles.size();
-    // Packed strands' vertices are read in place; others are copied.
-    auto copied = shape.fiber_vertices.empty() ? shape.positions.size() : 0;
-    plan.bytes += per_curve * elements + sizeof(vec4f) * copied + sizeof(uint32_t) * elements;
+    auto copied   = shape.fiber_vertices.empty() ? shape.positions.size() : 0;
+    auto bytes = per_curve * elements + sizeof(vec4f) * copied + sizeof(uint32_t) * elements;
+    plan.bytes += bytes;
+    split_bytes += shape.curves.empty() ? bytes : (per_curve + piece_bytes) * elements;
     plan.segments += (int64_t)shape.curves.size();
   }
   plan.pieces = plan.segments;
@@ -683,7 +687,7 @@ bvh_piece_plan plan_curve_pieces(const scene_data& scene, const bvh_params& para
   if (extra_pieces == 0) return none();
   // Within the budget: the most bent segments first.
   auto bytes_per_piece = per_curve + piece_bytes;
-  auto room = max_bytes > 0 ? (max_bytes - plan.bytes) / bytes_per_piece : 1e30;
+  auto room = max_bytes > 0 ? (max_bytes - split_bytes) / bytes_per_piece : 1e30;
   if ((double)extra_pieces > room) {
     std::sort(ratios.begin(), ratios.end(), std::greater<float>{});
     auto fitted = (int64_t)0;
@@ -699,7 +703,7 @@ bvh_piece_plan plan_curve_pieces(const scene_data& scene, const bvh_params& para
     if (extra_pieces == 0) return none();
   }
   plan.pieces += extra_pieces;
-  plan.bytes += bytes_per_piece * (double)extra_pieces;
+  plan.bytes = split_bytes + bytes_per_piece * (double)extra_pieces;
   return plan;
 }
 
