@@ -324,10 +324,11 @@ inline bool is_fiber(const shape_data& shape) {
 // them: a render packs its fibres before building the BVH, which then hands
 // Embree the scene's own memory instead of a float4 copy of every vertex
 // (208 MB less at 13M vertices, at the peak of the build). Shapes without a
-// radius for every vertex, and triangles, stay as they are. The functions
-// of yocto_scene, yocto_shading and yocto_bvh read packed and unpacked
-// shapes alike (through the three below); IO and the generators take
-// unpacked ones.
+// radius for every vertex, and triangles, stay as they are. What a render
+// reads reads packed and unpacked shapes alike, through the three below:
+// hit geometry, strands, bounds, the fingerprint (the same either way) and
+// the BVH. Validation, curves_to_lines, IO and the generators take
+// unpacked shapes.
 void pack_fiber_vertices(shape_data& shape);
 void pack_fiber_vertices(scene_data& scene);
 
