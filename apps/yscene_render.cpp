@@ -493,8 +493,8 @@ static int render_scene(const render_options& options, trace_params params,
     auto pieces   = (size_t)0;  // the curves Embree got for them
     for (auto i = 0; i < (int)scene.shapes.size(); i++) {
       auto& shape = scene.shapes[i];
-      segments += shape.lines.size() + shape.curves.size();
-      pieces += bvh.pieces[i].pieces.empty() ? shape.curves.size() : bvh.pieces[i].pieces.size();
+      segments += shape.lines.size() + num_curves(shape);
+      pieces += bvh.pieces[i].pieces.empty() ? num_curves(shape) : bvh.pieces[i].pieces.size();
     }
     std::printf("stats load_seconds=%.6f bvh_seconds=%.6f bvh_bytes=%lld segments=%zu "
                 "bvh_build_peak_bytes=%lld curve_pieces=%zu width=%d height=%d spp=%d "

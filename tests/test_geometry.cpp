@@ -858,11 +858,12 @@ TEST(geometry, curve_pieces_are_planned_from_rays_and_budget) {
 }
 
 // A render packs its fibres (pack_fiber_vertices) so that Embree reads the
-// scene's vertices in place. Packed or not, a groom is the same scene: the
-// same fingerprint, bounds, memory and strands, and its BVH gives the same
-// hits bit for bit (unsplit and in pieces; strands sharing their vertices,
-// lines, and segments with a vertex copy each, which Embree still copies),
-// for 3,000 rays; unsplit strands' BVH holds no copy of their vertices.
+// scene's vertices and strands' first indices in place. Packed or not, a
+// groom is the same scene: the same fingerprint, bounds and strands, and its
+// BVH gives the same hits bit for bit (unsplit and in pieces; strands
+// sharing their vertices, lines, and segments with a vertex copy each whose
+// indices run backwards, which Embree still copies), for 3,000 rays;
+// unsplit strands' BVH holds no copy of their vertices.
 TEST(bvh, packed_fibres_hit_and_shade_like_unpacked_ones) {
   auto style    = hair_style_params{};
   style.strands = 300;
@@ -875,7 +876,8 @@ TEST(bvh, packed_fibres_hit_and_shade_like_unpacked_ones) {
   auto kinds = std::vector<std::pair<std::string, scene_data>>{{"strands", groom}};
   kinds.push_back({"lines", groom});
   kinds.back().second.shapes[hair] = curves_to_lines(groom.shapes[hair], 3);
-  // A vertex copy per segment: elements no longer consecutive.
+  // A vertex copy per segment, indexed backwards (the same curve): the
+  // indices are not consecutive, and stay as they are.
   kinds.push_back({"copied", groom});
   auto& copied = kinds.back().second.shapes[hair];
   copied       = {};
@@ -885,7 +887,7 @@ TEST(bvh, packed_fibres_hit_and_shade_like_unpacked_ones) {
       copied.positions.push_back(groom.shapes[hair].positions[c[k]]);
       copied.radius.push_back(groom.shapes[hair].radius[c[k]]);
     }
-    copied.curves.push_back({base, base + 1, base + 2, base + 3});
+    copied.curves.push_back({base + 3, base + 2, base + 1, base});
   }
   auto bounds = compute_bounds(groom);
   for (auto& [kind, scene] : kinds) {
@@ -899,8 +901,17 @@ TEST(bvh, packed_fibres_hit_and_shade_like_unpacked_ones) {
       EXPECT_EQ(vertex_position(fibre, i), shape.positions[i]) << kind;
       EXPECT_EQ(vertex_radius(fibre, i), shape.radius[i]) << kind;
     }
+    // Strands keep one index a segment; reversed curves and lines all four.
+    EXPECT_EQ(fibre.curves.empty(), kind != "copied") << kind;
+    EXPECT_EQ(fibre.fiber_curves.size(), kind == "strands" ? shape.curves.size() : 0) << kind;
+    EXPECT_TRUE(is_fiber(fibre)) << kind;
+    ASSERT_EQ(num_curves(fibre), (int)shape.curves.size()) << kind;
+    for (auto i = 0; i < num_curves(shape); i++)
+      EXPECT_EQ(curve_vertices(fibre, i), shape.curves[i]) << kind;
     EXPECT_EQ(fingerprint_scene(packed), fingerprint_scene(scene)) << kind;
-    EXPECT_EQ(shape_memory(fibre), shape_memory(shape)) << kind;
+    EXPECT_EQ(shape_memory(fibre) + (kind == "strands" ? 12.0 * shape.curves.size() : 0.0),
+        shape_memory(shape))
+        << kind;
     auto a = compute_bounds(scene), b = compute_bounds(packed);
     EXPECT_TRUE(a.min == b.min && a.max == b.max) << kind;
     auto strands = make_fiber_strands(shape), packed_strands = make_fiber_strands(fibre);

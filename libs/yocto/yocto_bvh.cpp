@@ -93,7 +93,7 @@ static fiber_end eval_fiber_end(const shape_data& shape, int element, int end) {
     return end ? fiber_end{line.y, p(line.y) - p(line.x)}
                : fiber_end{line.x, p(line.x) - p(line.y)};
   }
-  auto& curve   = shape.curves[element];
+  auto  curve   = curve_vertices(shape, element);
   auto  outward = end ? p(curve.w) - p(curve.z) : p(curve.x) - p(curve.y);
   if (length(outward) == 0) outward = end ? p(curve.w) - p(curve.x) : p(curve.x) - p(curve.w);
   return {end ? curve.w : curve.x, outward};
@@ -177,6 +177,18 @@ static RTCGeometry make_curve_geometry(
   return geometry;
 }
 
+// Packed strands (pack_fiber_vertices): vertices and first indices, both
+// the scene's own memory, read in place.
+static RTCGeometry make_packed_curve_geometry(
+    RTCDevice device, const shape_data& shape, RTCGeometryType type) {
+  auto geometry = rtcNewGeometry(device, type);
+  rtcSetSharedGeometryBuffer(geometry, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT4,
+      shape.fiber_vertices.data(), 0, sizeof(vec4f), shape.fiber_vertices.size());
+  rtcSetSharedGeometryBuffer(geometry, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT,
+      shape.fiber_curves.data(), 0, sizeof(int), shape.fiber_curves.size());
+  return geometry;
+}
+
 // The bend of a segment over its diameter: the control polygon's distance
 // from the chord (which bounds the curve's) over twice the largest radius;
 // 0 for a straight segment or one with indices out of range.
@@ -209,13 +221,13 @@ static bvh_curve_pieces make_curve_pieces(
     const shape_data& shape, int max_pieces, float threshold) {
   auto pieces = bvh_curve_pieces{};
   max_pieces  = std::min(max_pieces, 4);  // k and n - 1 take 2 bits each
-  if (shape.curves.empty() || max_pieces <= 1 || shape.curves.size() >= (1u << 28))
-    return pieces;
+  auto count  = num_curves(shape);
+  if (count == 0 || max_pieces <= 1 || count >= (1 << 28)) return pieces;
   auto split = false;
-  for (auto& c : shape.curves) {
-    auto n       = segment_pieces(segment_bend_ratio(shape, c), threshold, max_pieces);
-    split        = split || n > 1;
-    auto element = (uint32_t)(&c - shape.curves.data());
+  for (auto element = 0u; element < (uint32_t)count; element++) {
+    auto c = curve_vertices(shape, (int)element);
+    auto n = segment_pieces(segment_bend_ratio(shape, c), threshold, max_pieces);
+    split  = split || n > 1;
     for (auto k = 0; k < n; k++) pieces.pieces.push_back(element << 4 | k << 2 | (n - 1));
   }
   if (!split) return {};
@@ -241,9 +253,8 @@ static RTCGeometry make_curve_pieces_geometry(RTCDevice device, const shape_data
     auto shares = false;
     if (i > 0) {
       auto element = pieces.pieces[i] >> 4, previous = pieces.pieces[i - 1] >> 4;
-      auto& c = shape.curves[element];
-      shares  = valid(c) && (element == previous || (valid(shape.curves[previous]) &&
-                                                        shape.curves[previous].w == c.x));
+      auto  c = curve_vertices(shape, (int)element), before = curve_vertices(shape, (int)previous);
+      shares  = valid(c) && (element == previous || (valid(before) && before.w == c.x));
     }
     indices[i] = (uint32_t)(shares ? next - 1 : next);
     next       = indices[i] + 4;
@@ -252,7 +263,7 @@ static RTCGeometry make_curve_pieces_geometry(RTCDevice device, const shape_data
       RTC_FORMAT_FLOAT4, sizeof(vec4f), next);
   if (!vertices) return release_unbuilt(geometry);
   for (size_t i = 0; i < npieces; i++) {
-    auto  c = shape.curves[pieces.pieces[i] >> 4];
+    auto  c = curve_vertices(shape, (int)(pieces.pieces[i] >> 4));
     auto  k = (int)(pieces.pieces[i] >> 2 & 3);
     auto  n = (int)(pieces.pieces[i] & 3) + 1;
     auto* v = vertices + indices[i];
@@ -288,8 +299,8 @@ static RTCGeometry make_curve_pieces_geometry(RTCDevice device, const shape_data
 // direction need no cap.
 static std::vector<uint32_t> make_fiber_caps(const shape_data& shape) {
   auto caps     = std::vector<uint32_t>{};
-  auto add_caps = [&](const auto& elements) {
-    if (elements.empty() || elements.size() >= (1u << 31)) return;
+  auto add_caps = [&](int count, const auto& element_at) {
+    if (count == 0) return;
     auto valid = [&](const auto& element) { return element_in_range(shape, element); };
     // Every segment end with its position's bits (+0 for -0). An end on the
     // same vertex as its neighbour element's (strands) is joined; the others
@@ -299,7 +310,7 @@ static std::vector<uint32_t> make_fiber_caps(const shape_data& shape) {
       std::array<uint32_t, 3> position = {};
       uint32_t                packed   = 0;
     };
-    auto last = (int)elements[0].length() - 1;
+    auto last = (int)element_at(0).length() - 1;
     auto bits = [&](int vertex) {
       auto position = vertex_position(shape, vertex) + vec3f{0, 0, 0};
       auto result   = std::array<uint32_t, 3>{};
@@ -308,15 +319,17 @@ static std::vector<uint32_t> make_fiber_caps(const shape_data& shape) {
     };
     auto joined = [&](int i, int end) {
       auto j = end ? i + 1 : i - 1;
-      if (j < 0 || j >= (int)elements.size() || !valid(elements[j])) return false;
-      return end ? elements[j][0] == elements[i][last] : elements[j][last] == elements[i][0];
+      if (j < 0 || j >= count || !valid(element_at(j))) return false;
+      auto a = element_at(i), b = element_at(j);
+      return end ? b[0] == a[last] : b[last] == a[0];
     };
     auto ends = std::vector<segment_end>{};
-    for (auto i = 0; i < (int)elements.size(); i++) {
-      if (!valid(elements[i])) continue;
+    for (auto i = 0; i < count; i++) {
+      auto element = element_at(i);
+      if (!valid(element)) continue;
       for (auto end = 0; end < 2; end++)
         if (!joined(i, end))
-          ends.push_back({bits(elements[i][end ? last : 0]), (uint32_t)i << 1 | end});
+          ends.push_back({bits(element[end ? last : 0]), (uint32_t)i << 1 | end});
     }
     auto by_position = [](const segment_end& a, const segment_end& b) {
       return a.position < b.position;
@@ -327,9 +340,9 @@ static std::vector<uint32_t> make_fiber_caps(const shape_data& shape) {
       alone[k] = (k == 0 || ends[k - 1].position != ends[k].position) &&
                  (k + 1 == ends.size() || ends[k + 1].position != ends[k].position);
     if (!ends.empty()) {
-      for (auto i = 0; i < (int)elements.size(); i++) {
-        if (!valid(elements[i]) || !joined(i, 1)) continue;
-        auto joint = segment_end{bits(elements[i][last]), 0};
+      for (auto i = 0; i < count; i++) {
+        if (!valid(element_at(i)) || !joined(i, 1)) continue;
+        auto joint = segment_end{bits(element_at(i)[last]), 0};
         auto found = std::lower_bound(ends.begin(), ends.end(), joint, by_position);
         if (found != ends.end() && found->position == joint.position)
           alone[found - ends.begin()] = false;
@@ -343,8 +356,12 @@ static std::vector<uint32_t> make_fiber_caps(const shape_data& shape) {
     }
     std::sort(caps.begin(), caps.end());
   };
-  if (!shape.lines.empty()) add_caps(shape.lines);
-  else if (!shape.curves.empty()) add_caps(shape.curves);
+  // Element counts fit the packing's 31 bits: an int's.
+  if (!shape.lines.empty() && shape.lines.size() < (1u << 31)) {
+    add_caps((int)shape.lines.size(), [&](int i) { return shape.lines[i]; });
+  } else if (num_curves(shape) > 0) {
+    add_caps(num_curves(shape), [&](int i) { return curve_vertices(shape, i); });
+  }
   return caps;
 }
 
@@ -409,7 +426,9 @@ static void filter_closest_fiber_hits(const RTCFilterFunctionNArguments* args) {
       continue;
     }
     auto element = RTCHitN_primID(args->hit, args->N, i);
-    if (!shape.curves.empty()) {
+    if (!shape.fiber_curves.empty()) {
+      __builtin_prefetch(shape.fiber_curves.data() + element);
+    } else if (!shape.curves.empty()) {
       __builtin_prefetch(shape.curves.data() + element);
     } else {
       __builtin_prefetch(shape.lines.data() + element);
@@ -433,6 +452,10 @@ static RTCGeometry make_shape_geometry(RTCDevice device, const shape_data& shape
                            : RTC_GEOMETRY_TYPE_ROUND_LINEAR_CURVE);
   } else if (!shape.curves.empty()) {
     geometry = make_curve_geometry(device, shape, shape.curves,
+        params.flat_curves ? RTC_GEOMETRY_TYPE_FLAT_BEZIER_CURVE
+                           : RTC_GEOMETRY_TYPE_ROUND_BEZIER_CURVE);
+  } else if (!shape.fiber_curves.empty()) {
+    geometry = make_packed_curve_geometry(device, shape,
         params.flat_curves ? RTC_GEOMETRY_TYPE_FLAT_BEZIER_CURVE
                            : RTC_GEOMETRY_TYPE_ROUND_BEZIER_CURVE);
   }
@@ -655,12 +678,13 @@ bvh_piece_plan plan_curve_pieces(const scene_data& scene, const bvh_params& para
   for (auto i = 0; i < (int)scene.shapes.size(); i++) {
     auto& shape = scene.shapes[i];
     if (!used[i]) continue;
-    auto elements = shape.curves.size() + shape.lines.size() + shape.triangles.size();
+    auto curves   = (size_t)num_curves(shape);
+    auto elements = curves + shape.lines.size() + shape.triangles.size();
     auto copied   = shape.fiber_vertices.empty() ? shape.positions.size() : 0;
     auto bytes = per_curve * elements + sizeof(vec4f) * copied + sizeof(uint32_t) * elements;
     plan.bytes += bytes;
-    split_bytes += shape.curves.empty() ? bytes : (per_curve + piece_bytes) * elements;
-    plan.segments += (int64_t)shape.curves.size();
+    split_bytes += curves == 0 ? bytes : (per_curve + piece_bytes) * elements;
+    plan.segments += (int64_t)curves;
   }
   plan.pieces = plan.segments;
   auto none   = [&]() {
@@ -673,9 +697,9 @@ bvh_piece_plan plan_curve_pieces(const scene_data& scene, const bvh_params& para
   auto ratios = std::vector<float>{};
   for (auto i = 0; i < (int)scene.shapes.size(); i++) {
     auto& shape = scene.shapes[i];
-    if (!used[i] || shape.curves.size() >= (1u << 28)) continue;
-    for (auto& c : shape.curves) {
-      auto ratio = segment_bend_ratio(shape, c);
+    if (!used[i] || num_curves(shape) >= (1 << 28)) continue;
+    for (auto element = 0; element < num_curves(shape); element++) {
+      auto ratio = segment_bend_ratio(shape, curve_vertices(shape, element));
       if (segment_pieces(ratio, plan.threshold, plan.max_pieces) > 1) ratios.push_back(ratio);
     }
   }

@@ -4,6 +4,7 @@
 
 #include "yocto_scene.h"
 
+#include <algorithm>
 #include <array>
 #include <cstring>
 #include <unordered_map>
@@ -232,7 +233,8 @@ double shape_memory(const shape_data& shape) {
          (double)shape.texcoords.size() * sizeof(vec2f) +
          (double)shape.radius.size() * sizeof(float) +
          (double)shape.colors.size() * sizeof(vec3f) +
-         (double)shape.fiber_vertices.size() * sizeof(vec4f);
+         (double)shape.fiber_vertices.size() * sizeof(vec4f) +
+         (double)shape.fiber_curves.size() * sizeof(int);
 }
 
 // Scene values into a hash_stream.
@@ -249,22 +251,18 @@ struct scene_hasher {
     (add_bytes(&values, sizeof(values)), ...);
   }
   void add(const frame3f& frame) { add_values(frame.x, frame.y, frame.z, frame.o); }
-  // The first three floats of each vertex (3) or the last (1), hashed as
-  // hash_bytes hashes an array of them: its words, then its size. Unpacked
-  // a block at a time (4096 vertices: whole words).
-  void add_packed(const std::vector<vec4f>& vertices, int channels) {
-    auto values = std::vector<float>{};
-    auto block  = size_t{4096};
-    for (size_t first = 0; first < vertices.size(); first += block) {
-      values.clear();
-      for (auto i = first; i < std::min(first + block, vertices.size()); i++) {
-        auto& v = vertices[i];
-        if (channels == 3) values.insert(values.end(), {v.x, v.y, v.z});
-        else values.push_back(v.w);
-      }
-      hash_words(stream, values.data(), values.size() * sizeof(float));
+  // The array of `count` values of T that value(i) gives, hashed as
+  // hash_bytes hashes it (its words, then its size), made a block at a time
+  // (4096 values: whole words): a packed shape's arrays as they were.
+  template <typename T, typename Value>
+  void add_unpacked(size_t count, const Value& value) {
+    auto block = std::vector<T>{};
+    for (size_t first = 0; first < count; first += 4096) {
+      block.clear();
+      for (auto i = first; i < std::min(first + 4096, count); i++) block.push_back(value(i));
+      hash_words(stream, block.data(), block.size() * sizeof(T));
     }
-    hash_word(stream, vertices.size() * channels * sizeof(float));
+    hash_word(stream, count * sizeof(T));
   }
   // Every hair parameter: the values in the table's order, then the has_
   // flags; first of the parameters that are not variation, then of those that
@@ -299,7 +297,12 @@ uint64_t fingerprint_scene(const scene_data& scene) {
   for (auto& shape : scene.shapes) {
     hasher.add(shape.triangles);
     hasher.add(shape.lines);
-    hasher.add(shape.curves);
+    if (shape.fiber_curves.empty()) {
+      hasher.add(shape.curves);
+    } else {
+      hasher.add_unpacked<vec4i>(shape.fiber_curves.size(),
+          [&](size_t i) { return curve_vertices(shape, (int)i); });
+    }
     if (shape.fiber_vertices.empty()) {
       hasher.add(shape.positions);
       hasher.add(shape.normals);
@@ -308,10 +311,13 @@ uint64_t fingerprint_scene(const scene_data& scene) {
     } else {
       // A packed shape hashes as it did unpacked: its positions, normals,
       // texcoords and radii in that order.
-      hasher.add_packed(shape.fiber_vertices, 3);
+      auto& vertices = shape.fiber_vertices;
+      hasher.add_unpacked<vec3f>(
+          vertices.size(), [&](size_t i) { return vertex_position(shape, (int)i); });
       hasher.add(shape.normals);
       hasher.add(shape.texcoords);
-      hasher.add_packed(shape.fiber_vertices, 1);
+      hasher.add_unpacked<float>(
+          vertices.size(), [&](size_t i) { return vertex_radius(shape, (int)i); });
     }
     // Only when present: the fingerprints of shapes without colours stay.
     if (!shape.colors.empty()) hasher.add(shape.colors);
@@ -361,6 +367,13 @@ void pack_fiber_vertices(shape_data& shape) {
   // Swapped with empty vectors: assigning {} would keep their memory.
   std::vector<vec3f>{}.swap(shape.positions);
   std::vector<float>{}.swap(shape.radius);
+  auto consecutive = std::all_of(shape.curves.begin(), shape.curves.end(), [](const vec4i& c) {
+    return c.y == c.x + 1 && c.z == c.x + 2 && c.w == c.x + 3;
+  });
+  if (shape.curves.empty() || !consecutive) return;
+  shape.fiber_curves.resize(shape.curves.size());
+  for (size_t i = 0; i < shape.curves.size(); i++) shape.fiber_curves[i] = shape.curves[i].x;
+  std::vector<vec4i>{}.swap(shape.curves);
 }
 void pack_fiber_vertices(scene_data& scene) {
   for (auto& shape : scene.shapes) pack_fiber_vertices(shape);
@@ -715,7 +728,7 @@ fiber_point eval_fiber_point(const scene_data& scene, const instance_data& insta
     tangent   = p(line.y) - p(line.x);
     radius    = r(line.x) * (1 - u) + r(line.y) * u;
   } else {
-    auto curve = shape.curves[element];
+    auto curve = curve_vertices(shape, element);
     auto p0 = p(curve.x), p1 = p(curve.y), p2 = p(curve.z), p3 = p(curve.w);
     axis    = eval_bezier(p0, p1, p2, p3, u);
     tangent = eval_bezier_derivative(p0, p1, p2, p3, u);
@@ -774,10 +787,10 @@ vec2f strand_random(const vec3f& root) {
 
 fiber_strands make_fiber_strands(const shape_data& shape) {
   auto strands  = fiber_strands{};
-  auto curves   = !shape.curves.empty();
-  auto count    = (int)(curves ? shape.curves.size() : shape.lines.size());
-  auto start_of = [&](int i) { return curves ? shape.curves[i].x : shape.lines[i].x; };
-  auto end_of   = [&](int i) { return curves ? shape.curves[i].w : shape.lines[i].y; };
+  auto curves   = num_curves(shape) > 0;
+  auto count    = curves ? num_curves(shape) : (int)shape.lines.size();
+  auto start_of = [&](int i) { return curves ? curve_vertices(shape, i).x : shape.lines[i].x; };
+  auto end_of   = [&](int i) { return curves ? curve_vertices(shape, i).w : shape.lines[i].y; };
   // Segments by the position they start at (bits: exact matches only).
   auto key = [&](int vertex) {
     auto  p = vertex_position(shape, vertex);

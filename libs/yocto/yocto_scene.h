@@ -86,8 +86,10 @@ struct shape_data {
   std::vector<vec3f> colors    = {};
   // A fibre shape packed for rendering (pack_fiber_vertices): each vertex's
   // position and radius as one float4, the layout Embree reads, in place of
-  // positions and radius (then empty).
+  // positions and radius (then empty); and, for curves whose four vertices
+  // are consecutive (strands), each one's first vertex in place of curves.
   std::vector<vec4f> fiber_vertices = {};
+  std::vector<int>   fiber_curves   = {};
 };
 
 struct instance_data {
@@ -317,18 +319,20 @@ bbox3f compute_bounds(const scene_data& scene);
 
 // Is this a fiber shape (lines or curves)?
 inline bool is_fiber(const shape_data& shape) {
-  return !shape.lines.empty() || !shape.curves.empty();
+  return !shape.lines.empty() || !shape.curves.empty() || !shape.fiber_curves.empty();
 }
 
 // Packs a fibre shape's positions and radii into fiber_vertices, freeing
 // them: a render packs its fibres before building the BVH, which then hands
 // Embree the scene's own memory instead of a float4 copy of every vertex
-// (208 MB less at 13M vertices, at the peak of the build). Shapes without a
+// (208 MB less at 13M vertices, at the peak of the build). Curves whose
+// vertices are consecutive keep their first index only (fiber_curves: 4
+// bytes a segment, not 16), which is what Embree reads. Shapes without a
 // radius for every vertex, and triangles, stay as they are. What a render
-// reads reads packed and unpacked shapes alike, through the three below:
-// hit geometry, strands, bounds, the fingerprint (the same either way) and
-// the BVH. Validation, curves_to_lines, IO and the generators take
-// unpacked shapes.
+// reads reads packed and unpacked shapes alike, through the functions
+// below: hit geometry, strands, bounds, the fingerprint (the same either
+// way) and the BVH. Validation, curves_to_lines, IO and the generators
+// take unpacked shapes.
 void pack_fiber_vertices(shape_data& shape);
 void pack_fiber_vertices(scene_data& scene);
 
@@ -346,6 +350,15 @@ inline vec3f vertex_position(const shape_data& shape, int index) {
 inline float vertex_radius(const shape_data& shape, int index) {
   if (!shape.fiber_vertices.empty()) return shape.fiber_vertices[index].w;
   return index < (int)shape.radius.size() ? shape.radius[index] : 0.0f;
+}
+// The number of Bezier curves and a curve's four vertices, packed or not.
+inline int num_curves(const shape_data& shape) {
+  return (int)(shape.fiber_curves.empty() ? shape.curves.size() : shape.fiber_curves.size());
+}
+inline vec4i curve_vertices(const shape_data& shape, int element) {
+  if (shape.fiber_curves.empty()) return shape.curves[element];
+  auto first = shape.fiber_curves[element];
+  return {first, first + 1, first + 2, first + 3};
 }
 
 // Cubic Bezier evaluation and derivative at u in [0, 1].
