@@ -806,18 +806,18 @@ TEST(geometry, curve_pieces_are_planned_from_rays_and_budget) {
   EXPECT_EQ(full.threshold, 1.0f);
   EXPECT_GT(full.pieces, (int64_t)(1.5 * segments));
   // Built as planned: Embree gets the planned curves.
-  auto build = [&](const bvh_piece_plan& plan, double budget) {
+  auto build = [&](const scene_data& scene, const bvh_piece_plan& plan, double budget) {
     auto bvh       = scene_bvh{};
     auto error     = std::string{};
     params.max_curve_pieces      = plan.max_pieces;
     params.curve_piece_threshold = plan.threshold;
     params.max_bytes             = budget;
-    EXPECT_TRUE(make_scene_bvh(bvh, curly, params, error)) << error;
+    EXPECT_TRUE(make_scene_bvh(bvh, scene, params, error)) << error;
     auto pieces = bvh.pieces[0].pieces.empty() ? segments : (double)bvh.pieces[0].pieces.size();
     EXPECT_EQ(pieces, (double)plan.pieces);
     return bvh;
   };
-  auto whole_bvh = build(plan, 0), full_bvh = build(full, 0);
+  auto whole_bvh = build(curly, plan, 0), full_bvh = build(curly, full, 0);
   // Half way between the two: fewer pieces, the most bent first, and the
   // build fits (the estimate errs on the side of the budget).
   params.max_curve_pieces      = 4;
@@ -828,7 +828,7 @@ TEST(geometry, curve_pieces_are_planned_from_rays_and_budget) {
   EXPECT_GT(half.threshold, 1.0f);
   EXPECT_GT(half.pieces, plan.pieces);
   EXPECT_LT(half.pieces, full.pieces);
-  auto half_bvh = build(half, budget);
+  auto half_bvh = build(curly, half, budget);
   EXPECT_LE(half_bvh.build_peak_memory, budget);
   std::printf("[ figure ] planned pieces: %lld of %lld within %.0f bytes (built peak %lld)\n",
       (long long)half.pieces, (long long)full.pieces, budget,
@@ -845,12 +845,7 @@ TEST(geometry, curve_pieces_are_planned_from_rays_and_budget) {
   EXPECT_EQ(packed_half.pieces, half.pieces);
   EXPECT_EQ(packed_half.threshold, half.threshold);
   EXPECT_LE(packed_half.bytes, budget);
-  auto packed_bvh              = scene_bvh{};
-  auto error                   = std::string{};
-  params.max_curve_pieces      = packed_half.max_pieces;
-  params.curve_piece_threshold = packed_half.threshold;
-  params.max_bytes             = budget;
-  EXPECT_TRUE(make_scene_bvh(packed_bvh, packed, params, error)) << error;
+  auto packed_bvh = build(packed, packed_half, budget);
   EXPECT_LE(packed_bvh.build_peak_memory, budget);
   // A budget the unsplit BVH alone exceeds: no pieces.
   params.max_curve_pieces = 4;

@@ -114,17 +114,17 @@ static bool element_in_range(const shape_data& shape, const Element& element) {
   return true;
 }
 
-// Embree's curve index buffers hold the first vertex of each segment and take
-// the next ones consecutively. Shapes whose elements are consecutive (strands)
-// share their vertices; others get a vertex copy per element.
-template <typename Element>
-static bool elements_are_consecutive(const std::vector<Element>& elements) {
-  for (auto& element : elements)
-    for (auto k = 1; k < (int)element.length(); k++)
-      if (element[k] != element[0] + k) return false;
-  return true;
+// Packed vertices (pack_fiber_vertices) are Embree's layout: the scene's
+// own memory, read in place.
+static void share_packed_vertices(RTCGeometry geometry, const shape_data& shape) {
+  rtcSetSharedGeometryBuffer(geometry, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT4,
+      shape.fiber_vertices.data(), 0, sizeof(vec4f), shape.fiber_vertices.size());
 }
 
+// Embree's curve index buffers hold the first vertex of each segment and take
+// the next ones consecutively. Shapes whose elements are consecutive (strands,
+// elements_are_consecutive) share their vertices; others get a vertex copy per
+// element.
 template <typename Element>
 static RTCGeometry make_curve_geometry(
     RTCDevice device, const shape_data& shape, const std::vector<Element>& elements,
@@ -137,8 +137,7 @@ static RTCGeometry make_curve_geometry(
   auto in_place = shared && !shape.fiber_vertices.empty();
   auto vertices = (vec4f*)nullptr;
   if (in_place) {
-    rtcSetSharedGeometryBuffer(geometry, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT4,
-        shape.fiber_vertices.data(), 0, sizeof(vec4f), nvertices);
+    share_packed_vertices(geometry, shape);
   } else {
     vertices = (vec4f*)rtcSetNewGeometryBuffer(geometry, RTC_BUFFER_TYPE_VERTEX, 0,
         RTC_FORMAT_FLOAT4, sizeof(vec4f), nvertices);
@@ -182,8 +181,7 @@ static RTCGeometry make_curve_geometry(
 static RTCGeometry make_packed_curve_geometry(
     RTCDevice device, const shape_data& shape, RTCGeometryType type) {
   auto geometry = rtcNewGeometry(device, type);
-  rtcSetSharedGeometryBuffer(geometry, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT4,
-      shape.fiber_vertices.data(), 0, sizeof(vec4f), shape.fiber_vertices.size());
+  share_packed_vertices(geometry, shape);
   rtcSetSharedGeometryBuffer(geometry, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT,
       shape.fiber_curves.data(), 0, sizeof(int), shape.fiber_curves.size());
   return geometry;

@@ -4,7 +4,6 @@
 
 #include "yocto_scene.h"
 
-#include <algorithm>
 #include <array>
 #include <cstring>
 #include <unordered_map>
@@ -367,10 +366,7 @@ void pack_fiber_vertices(shape_data& shape) {
   // Swapped with empty vectors: assigning {} would keep their memory.
   std::vector<vec3f>{}.swap(shape.positions);
   std::vector<float>{}.swap(shape.radius);
-  auto consecutive = std::all_of(shape.curves.begin(), shape.curves.end(), [](const vec4i& c) {
-    return c.y == c.x + 1 && c.z == c.x + 2 && c.w == c.x + 3;
-  });
-  if (shape.curves.empty() || !consecutive) return;
+  if (shape.curves.empty() || !elements_are_consecutive(shape.curves)) return;
   shape.fiber_curves.resize(shape.curves.size());
   for (size_t i = 0; i < shape.curves.size(); i++) shape.fiber_curves[i] = shape.curves[i].x;
   std::vector<vec4i>{}.swap(shape.curves);
@@ -787,10 +783,9 @@ vec2f strand_random(const vec3f& root) {
 
 fiber_strands make_fiber_strands(const shape_data& shape) {
   auto strands  = fiber_strands{};
-  auto curves   = num_curves(shape) > 0;
-  auto count    = curves ? num_curves(shape) : (int)shape.lines.size();
-  auto start_of = [&](int i) { return curves ? curve_vertices(shape, i).x : shape.lines[i].x; };
-  auto end_of   = [&](int i) { return curves ? curve_vertices(shape, i).w : shape.lines[i].y; };
+  auto count    = shape.lines.empty() ? num_curves(shape) : (int)shape.lines.size();
+  auto start_of = [&](int i) { return segment_ends(shape, i).x; };
+  auto end_of   = [&](int i) { return segment_ends(shape, i).y; };
   // Segments by the position they start at (bits: exact matches only).
   auto key = [&](int vertex) {
     auto  p = vertex_position(shape, vertex);

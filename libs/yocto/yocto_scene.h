@@ -351,6 +351,16 @@ inline float vertex_radius(const shape_data& shape, int index) {
   if (!shape.fiber_vertices.empty()) return shape.fiber_vertices[index].w;
   return index < (int)shape.radius.size() ? shape.radius[index] : 0.0f;
 }
+// Do the vertex indices of each element run consecutively from its first
+// (strands: what Embree's index buffers and fiber_curves keep)?
+template <typename Element>
+inline bool elements_are_consecutive(const std::vector<Element>& elements) {
+  for (auto& element : elements)
+    for (auto k = 1; k < (int)element.length(); k++)
+      if (element[k] != element[0] + k) return false;
+  return true;
+}
+
 // The number of Bezier curves and a curve's four vertices, packed or not.
 inline int num_curves(const shape_data& shape) {
   return (int)(shape.fiber_curves.empty() ? shape.curves.size() : shape.fiber_curves.size());
@@ -359,6 +369,12 @@ inline vec4i curve_vertices(const shape_data& shape, int element) {
   if (shape.fiber_curves.empty()) return shape.curves[element];
   auto first = shape.fiber_curves[element];
   return {first, first + 1, first + 2, first + 3};
+}
+// A fibre segment's first and last vertex (a line's two, a curve's ends).
+inline vec2i segment_ends(const shape_data& shape, int element) {
+  if (!shape.lines.empty()) return shape.lines[element];
+  auto curve = curve_vertices(shape, element);
+  return {curve.x, curve.w};
 }
 
 // Cubic Bezier evaluation and derivative at u in [0, 1].

@@ -90,8 +90,7 @@ material_point eval_material_point(const scene_data& scene, const shading_contex
         auto hair = material.hair;
         auto t    = uv.x;  // along the segment
         if (!shape.colors.empty() && hair.has_color && !hair.has_sigma_a) {
-          auto curve = num_curves(shape) > 0 ? curve_vertices(shape, element) : vec4i{};
-          auto ends  = num_curves(shape) == 0 ? shape.lines[element] : vec2i{curve.x, curve.w};
+          auto ends  = segment_ends(shape, element);
           hair.color = shape.colors[ends.x] + (shape.colors[ends.y] - shape.colors[ends.x]) * t;
         }
         auto& strands = context.strands[instance.shape];
