@@ -213,6 +213,7 @@ static std::string render_settings(const scene_data& scene, const trace_params& 
   // Only when on, so that the settings of renders without AOVs stay as they were.
   if (params.aovs) line("aovs", "1");
   line("adaptive", trace_adaptive_names[(int)params.adaptive]);
+  line("allocation", params.allocation ? "learned" : "off");
   line("hair", std::string(params.hair_sampling.four_numbers ? "four-numbers" : "demux") +
                    (params.hair_sampling.per_hit ? " per-hit" : "") +
                    (params.hair_sampling.mixture_weight ? " mixture-weight" : "") +
@@ -499,13 +500,17 @@ static int render_scene(const render_options& options, trace_params params,
     std::printf("stats load_seconds=%.6f bvh_seconds=%.6f bvh_bytes=%lld segments=%zu "
                 "bvh_build_peak_bytes=%lld curve_pieces=%zu width=%d height=%d spp=%d "
                 "render_seconds=%.6f render_cpu=%.6f rays=%lld peak_memory=%lld clamped=%lld "
-                "clamped_energy=%.6g roulette_threshold=%.6g adaptive=%d adaptive_gain=%.4g split=%d\n",
+                "clamped_energy=%.6g roulette_threshold=%.6g adaptive=%d adaptive_gain=%.4g split=%d "
+                "allocation_cells=%d vertices=%lld light_samples=%lld shadow_rays=%lld\n",
         load_time, bvh.build_seconds, (long long)bvh.peak_memory, segments,
         (long long)bvh.build_peak_memory, pieces, state.width,
         state.height, state.samples, render_time, render_cpu, (long long)state.rays.load(),
         (long long)peak_memory(), (long long)state.clamped.load(),
         clamped_energy_fraction(state), state.roulette_threshold, state.rates.empty() ? 0 : 1,
-        state.adaptive_gain, state.split);
+        state.adaptive_gain, state.split,
+        state.allocation.cells.x * state.allocation.cells.y * state.allocation.cells.z,
+        (long long)state.vertices.load(), (long long)state.light_samples.load(),
+        (long long)state.shadow_rays.load());
   }
   return 0;
 } catch (const std::bad_alloc&) {
@@ -557,6 +562,10 @@ CLI::App* add_render_command(CLI::App& app, render_command& command, std::string
           "paths per camera ray, sharing its first hit (0 = automatic: 2 where the render "
           "samples adaptively and samples no light, else 1)")
       ->check(CLI::Range(0, 1024));
+  render->add_flag("--allocation,!--no-allocation", params.allocation,
+      "shadow rays per region of the scene from the visibility the pilot measured there "
+      "(EARS/MARS: each light sample cast with the probability that maximises efficiency, "
+      "the default), or the roulette of --shadow-threshold");
   render->add_option("--shadow-threshold", params.shadow_threshold,
           "light samples that would add less than this play a roulette for their shadow ray")
       ->check(CLI::NonNegativeNumber);

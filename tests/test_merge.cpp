@@ -204,6 +204,8 @@ static std::vector<fixed_sum3> add_up_parts(const scene_data& scene, const scene
     }
     EXPECT_EQ(state.roulette_threshold, whole.roulette_threshold) << part.front();
     EXPECT_TRUE(state.rates == whole.rates) << part.front();
+    EXPECT_TRUE(state.allocation.visibility == whole.allocation.visibility) << part.front();
+    EXPECT_EQ(state.allocation.pixel_deviation, whole.allocation.pixel_deviation);
     for (size_t i = 0; i < added.size(); i++) add_fixed(added[i], state.sums[i]);
   }
   return added;
@@ -240,6 +242,42 @@ TEST(merge, split_renders_of_ranges_add_up_to_one_render) {
   trace_samples(unsplit, scene, bvh, context, params, params.samples);
   EXPECT_FALSE(unsplit.sums == whole.sums);
   EXPECT_LT(unsplit.rays, whole.rays);
+}
+
+// A sun beside the sky: the shadow rays' allocation (learned by the pilot)
+// is the same in every part, so that 12 samples at once (2 threads) equal,
+// bit for bit, the sums of the parts 0:5, 5:12 and of 0:3, 3:4:8, 8:12 (1
+// and 2 threads). The allocation skips shadow rays (fewer than the light
+// samples) and renders other bits than the roulette of shadow_threshold.
+TEST(merge, renders_with_shadow_allocation_of_ranges_add_up_to_one_render) {
+  auto scene = make_small_hair_scene();
+  scene.distant_lights.push_back({normalize(vec3f{1, 2, 1}), {3, 3, 3}});
+  auto bvh   = scene_bvh{};
+  auto error = std::string{};
+  ASSERT_TRUE(make_scene_bvh(bvh, scene, {}, error)) << error;
+  auto params       = trace_params{};
+  params.resolution = 24;
+  params.samples    = 12;
+  params.threads    = 2;
+  ASSERT_TRUE(check_trace_params(scene, params, error)) << error;
+  auto context = make_trace_context(scene, params);
+  auto whole   = trace_state{};
+  init_trace_state(whole, scene, params);
+  trace_samples(whole, scene, bvh, context, params, params.samples);
+  EXPECT_EQ(whole.nonfinite, 0);
+  ASSERT_GT(whole.allocation.cells.x, 0);
+  EXPECT_GT(whole.light_samples, 0);
+  EXPECT_LT(whole.shadow_rays, whole.light_samples);
+  EXPECT_TRUE(add_up_parts(scene, bvh, context, params, {{0, 5}, {5, 12}}, whole) == whole.sums);
+  EXPECT_TRUE(
+      add_up_parts(scene, bvh, context, params, {{0, 3}, {3, 4, 8}, {8, 12}}, whole) ==
+      whole.sums);
+  params.allocation = false;
+  auto off          = trace_state{};
+  init_trace_state(off, scene, params);
+  trace_samples(off, scene, bvh, context, params, params.samples);
+  EXPECT_FALSE(off.sums == whole.sums);
+  EXPECT_EQ(off.allocation.cells.x, 0);
 }
 
 // Adaptive sampling: 16 samples at once equal, bit for bit, the exact sums

@@ -58,7 +58,8 @@ static std::vector<int8_t> make_sequence_slots(
     if (glossy || bounce >= params.roulette_bounce) take(pairs + trace_pair_lobe_roulette);
     take(pairs + trace_pair_direction);
     if (four_numbers) take(pairs + trace_pair_direction_more);
-    if (samples_lights && params.shadow_threshold > 0) take(pairs + trace_pair_shadow);
+    if (samples_lights && (params.shadow_threshold > 0 || params.allocation))
+      take(pairs + trace_pair_shadow);
   }
   return slots;
 }
@@ -145,6 +146,7 @@ trace_context make_trace_context(const scene_data& scene, const trace_params& pa
     light.distant = i;
     context.lights.push_back(light);
   }
+  for (auto& light : context.lights) context.mis_lights |= light.distant < 0;
   if (params.sequence == sequence_type::global_sobol && !scene.cameras.empty())
     context.sequence_slots =
         make_sequence_slots(scene, params, paths_sample_lights(params, context));
@@ -305,6 +307,18 @@ struct trace_roulette_point {
   int64_t rays    = 0;
 };
 
+// A shadow ray a pilot path cast: the point it left and whether it reached
+// its light.
+struct trace_shadow_record {
+  vec3f position = {0, 0, 0};
+  bool  visible  = false;
+};
+
+// What paths did on a row of the image (see trace_state).
+struct trace_tally {
+  int64_t vertices = 0, light_samples = 0, shadow_rays = 0;
+};
+
 // The camera ray of a sample of pixel (i, j) of a width x height image; the
 // lens pair is drawn only for cameras with a lens (a pinhole ignores it).
 static ray3f sample_camera_ray(const camera_data& camera, int i, int j, int width,
@@ -317,7 +331,8 @@ static ray3f sample_camera_ray(const camera_data& camera, int i, int j, int widt
 
 // What every vertex of a path needs: the scene, its BVH and lights, the
 // parameters, the roulette threshold, the ray counter and, when not null,
-// the list of rays cast and (pilot paths) the roulette points met.
+// the list of rays cast, (pilot paths) the roulette points met and shadow
+// rays cast, the shadow rays' allocation and the tally of what paths did.
 struct trace_walk {
   const scene_data&                  scene;
   const scene_bvh&                   bvh;
@@ -327,7 +342,20 @@ struct trace_walk {
   int64_t&                           rays;
   std::vector<trace_ray>*            record          = nullptr;
   std::vector<trace_roulette_point>* roulette_points = nullptr;
+  std::vector<trace_shadow_record>*  shadows         = nullptr;
+  const trace_allocation*            allocation      = nullptr;
+  trace_tally*                       tally           = nullptr;
 };
+
+int find_allocation_cell(const trace_allocation& allocation, const vec3f& position) {
+  auto& cells = allocation.cells;
+  if (cells.x <= 0) return -1;
+  auto local = (position - allocation.bounds.min) * allocation.cell_scale;
+  if (!isfinite(local)) return -1;
+  auto i = std::clamp((int)local.x, 0, cells.x - 1), j = std::clamp((int)local.y, 0, cells.y - 1),
+       k = std::clamp((int)local.z, 0, cells.z - 1);
+  return (k * cells.y + j) * cells.x + i;
+}
 
 static scene_intersection cast_closest(const trace_walk& walk, const ray3f& ray) {
   walk.rays++;
@@ -349,11 +377,14 @@ static scene_intersection cast_closest(const trace_walk& walk, const ray3f& ray)
 // by the lobes' shares of the sampled direction's value): see AOVS.
 static void scatter_path(const trace_walk& walk, material_point point, ray3f ray, int bounce,
     vec3f weight, sequence_state& sequence, vec3f& radiance, vec3f* lobes = nullptr) {
-  auto& [scene, bvh, context, params, threshold, rays, record, points] = walk;
+  auto& [scene, bvh, context, params, threshold, rays, record, points, shadows, allocation,
+      tally] = walk;
   auto use_mis = params.sampler == trace_sampler_type::path;
   // Next-event estimation, when there are lights to sample; MIS weighs the
-  // BSDF samples that find them, so only then is a BSDF pdf needed.
+  // BSDF samples that find lights with area, so only then is a BSDF pdf
+  // needed (no BSDF sample finds a distant light).
   auto samples_lights = paths_sample_lights(params, context);
+  auto needs_pdf      = samples_lights && context.mis_lights;
   // The lobe split: at the first hair vertex, each lobe's share of what the
   // rest of the path brings (radiance beyond `lobe_mark`).
   auto split_lobes  = false;
@@ -362,6 +393,7 @@ static void scatter_path(const trace_walk& walk, material_point point, ray3f ray
   for (;; bounce++) {
     auto outgoing = -ray.d;
     auto first_hair = lobes && !split_lobes && point.type == material_type::hair;
+    if (tally) tally->vertices++;
     // Next-event estimation: one light, one shadow ray.
     auto pairs = trace_bounce_pairs(bounce);
     if (samples_lights) {
@@ -373,21 +405,34 @@ static void scatter_path(const trace_walk& walk, material_point point, ray3f ray
       auto  sample  = sample_light(scene, light, point.position, rel, ruv);
       auto  incoming = sample.incoming;
       // The shadow ray is cast only for a sample that would add light if
-      // visible; a sky sample that would add little (below
-      // params.shadow_threshold times the sky's average radiance, the value
-      // of a white surface under it) survives a roulette with probability
-      // proportional to what it adds, and is weighted up when it does, so
+      // visible, with the allocation's probability for its region (see
+      // trace_allocation) or, without one, a sky sample that would add
+      // little (below params.shadow_threshold times the sky's average
+      // radiance, the value of a white surface under it) with probability
+      // proportional to what it adds; it is weighted up when it is cast, so
       // that the estimate is unbiased.
       if (incoming != vec3f{0, 0, 0} && may_scatter(point, outgoing, incoming)) {
         auto [emission, pdf, delta] = eval_light_sample(scene, context, light, sample, incoming);
         if (pdf > 0 && emission != vec3f{0, 0, 0}) {
-          auto [bsdfcos, scatter_pdf] = eval_bsdfcos_and_pdf(point, outgoing, incoming);
+          // A delta light takes no MIS weight: no pdf.
+          auto bsdfcos     = vec3f{0, 0, 0};
+          auto scatter_pdf = 0.0f;
+          if (delta) bsdfcos = eval_bsdfcos(point, outgoing, incoming);
+          else std::tie(bsdfcos, scatter_pdf) = eval_bsdfcos_and_pdf(point, outgoing, incoming);
           auto mis      = delta ? 1.0f : power_heuristic(pdf, scatter_pdf);
           auto contribution = weight * bsdfcos * emission * (mis / pdf);
           auto value    = max_component(contribution);
-          auto threshold = params.shadow_threshold * light.radiance;
-          auto survive  = value > 0 && value < threshold ? value / threshold : 1.0f;
-          if (value > 0 &&
+          auto survive  = 1.0f;
+          auto cell     = allocation ? find_allocation_cell(*allocation, point.position) : -1;
+          if (cell >= 0) {
+            survive = std::min(
+                value * allocation->visibility[cell] / allocation->pixel_deviation, 1.0f);
+          } else {
+            auto threshold = params.shadow_threshold * light.radiance;
+            survive = value > 0 && value < threshold ? value / threshold : 1.0f;
+          }
+          if (tally && value > 0) tally->light_samples++;
+          if (value > 0 && survive > 0 &&
               (survive == 1 || sample_sequence2f(sequence, pairs + trace_pair_shadow).x < survive)) {
             auto shadow = spawn_ray(point, incoming);
             // Area lights: visibility of the sampled point itself (stopping
@@ -396,7 +441,10 @@ static void scatter_path(const trace_walk& walk, material_point point, ray3f ray
               shadow.tmax = length(sample.position - shadow.o) * (1 - 1e-3f);
             if (record) record->push_back({shadow, true});
             rays++;
-            if (!intersect_scene_bvh_any(bvh, shadow)) {
+            if (tally) tally->shadow_rays++;
+            auto visible = !intersect_scene_bvh_any(bvh, shadow);
+            if (shadows) shadows->push_back({point.position, visible});
+            if (visible) {
               radiance += contribution / survive;
               if (first_hair) {
                 auto terms = eval_bsdfcos_lobes(point, outgoing, incoming);
@@ -419,7 +467,7 @@ static void scatter_path(const trace_walk& walk, material_point point, ray3f ray
       rn = sample_sequence2f(sequence, pairs + trace_pair_direction);
     }
     // The pdf only where an MIS weight will need it (0 otherwise).
-    auto sample = sample_bsdf(point, outgoing, lobe_roulette.x, rn, more, samples_lights);
+    auto sample = sample_bsdf(point, outgoing, lobe_roulette.x, rn, more, needs_pdf);
     if (sample.weight == vec3f{0, 0, 0}) break;
     auto incoming = sample.incoming;
     auto bsdf_pdf = sample.pdf;
@@ -497,7 +545,9 @@ struct trace_aov_sample {
 };
 static vec3f trace_path(const trace_walk& walk, const ray3f& camera_ray,
     sequence_state& sequence, trace_aov_sample* aov = nullptr) {
-  auto& [scene, bvh, context, params, threshold, rays, record, points] = walk;
+  auto& scene   = walk.scene;
+  auto& context = walk.context;
+  auto& params  = walk.params;
   auto intersection = cast_closest(walk, camera_ray);
   if (!intersection.hit) return eval_environments(scene, context, camera_ray.d, 0);
   auto point    = eval_material_point(scene, context.shading, intersection.instance,
@@ -678,7 +728,9 @@ void init_trace_state(trace_state& state, const scene_data& scene, const trace_p
   state.roulette_threshold = 0;
   state.adaptive_gain      = 0;
   state.rates.clear();
-  state.split = 0;
+  state.split      = 0;
+  state.allocation = {};
+  state.vertices = 0, state.light_samples = 0, state.shadow_rays = 0;
 }
 
 // Runs f(begin, end) over [0, size) in chunks on `threads` threads (0 for
@@ -698,6 +750,54 @@ static void parallel_chunks(int64_t size, int64_t grain, int threads, Func&& fun
   });
 }
 
+// The allocation from the pilot's shadow rays (see trace_allocation): a
+// grid over the points they left, of cells of about 256 rays each on
+// average (at most 64 a side), each cell's fraction of visible rays shrunk
+// towards the whole scene's by a prior of 16 rays.
+static trace_allocation make_trace_allocation(
+    const std::vector<std::vector<trace_shadow_record>>& rows, double pixel_deviation) {
+  auto allocation = trace_allocation{};
+  auto bounds     = bbox3f{};
+  auto count      = (size_t)0;
+  for (auto& row : rows) {
+    for (auto& shadow : row) {
+      if (!isfinite(shadow.position)) continue;
+      bounds = merge(bounds, shadow.position);
+      count++;
+    }
+  }
+  if (count == 0 || !(pixel_deviation > 0) || !std::isfinite(pixel_deviation)) return allocation;
+  // A flat or tiny cloud of points still gets cells of some size.
+  auto extent = max(bounds.max - bounds.min, vec3f{1e-6f, 1e-6f, 1e-6f});
+  extent      = max(extent, vec3f{1, 1, 1} * (max_component(extent) * 1e-3f));
+  auto target = std::max((double)count / 256, 1.0);
+  auto side   = std::cbrt((double)extent.x * extent.y * extent.z / target);
+  auto cells  = vec3i{0, 0, 0};
+  for (auto a = 0; a < 3; a++) cells[a] = std::clamp((int)std::ceil(extent[a] / side), 1, 64);
+  allocation.bounds          = bounds;
+  allocation.cells           = cells;
+  allocation.cell_scale      = vec3f(cells) / extent;
+  allocation.pixel_deviation = (float)pixel_deviation;
+  auto ncells  = (size_t)cells.x * cells.y * cells.z;
+  auto rays    = std::vector<double>(ncells), visible = std::vector<double>(ncells);
+  auto total   = 0.0, total_visible = 0.0;
+  for (auto& row : rows) {
+    for (auto& shadow : row) {
+      auto cell = find_allocation_cell(allocation, shadow.position);
+      if (cell < 0) continue;
+      rays[cell] += 1, visible[cell] += shadow.visible ? 1 : 0;
+      total += 1, total_visible += shadow.visible ? 1 : 0;
+    }
+  }
+  auto prior = 16.0, scene_visible = total_visible / std::max(total, 1.0);
+  allocation.visibility.resize(ncells);
+  for (size_t cell = 0; cell < ncells; cell++) {
+    auto fraction = (visible[cell] + prior * scene_visible) / (rays[cell] + prior);
+    allocation.visibility[cell] = (float)std::sqrt(std::clamp(fraction, 0.0, 1.0));
+  }
+  return allocation;
+}
+
 // The roulette threshold of a render, from a pilot: Rath et al. 2022
 // (Efficiency-Aware Russian Roulette and Splitting, EARS) give a path of
 // throughput w the survival probability q = w sqrt(E[L^2] / c) /
@@ -713,7 +813,8 @@ static void parallel_chunks(int64_t size, int64_t grain, int threads, Func&& fun
 // stratified numbers make it. The tails are those of the pilot's own
 // roulette, each weighted by the inverse of its survival probability. The
 // 16 paths of a grid pixel also give its variance and rays per path, for the
-// gain of adaptive sampling (see trace_pilot).
+// gain of adaptive sampling (see trace_pilot) and, with params.allocation,
+// its shadow rays the allocation's visibility (see make_trace_allocation).
 trace_pilot run_trace_pilot(const scene_data& scene, const scene_bvh& bvh,
     const trace_context& context, const trace_params& params) {
   auto size   = camera_resolution(scene.cameras[params.camera], params.resolution);
@@ -732,6 +833,8 @@ trace_pilot run_trace_pilot(const scene_data& scene, const scene_bvh& bvh,
   // rays, samples, tail second moment, tail rays and roulette points; added
   // in row order.
   auto rows = std::vector<std::array<double, 7>>(ny);
+  // Per grid row, with params.allocation: the shadow rays cast.
+  auto row_shadows = std::vector<std::vector<trace_shadow_record>>(params.allocation ? ny : 0);
   // Per grid pixel: the variance of one path (mean over channels) and its
   // rays, for the gain of adaptive sampling.
   auto pixel_moments = std::vector<std::array<double, 2>>((size_t)nx * ny);
@@ -739,9 +842,12 @@ trace_pilot run_trace_pilot(const scene_data& scene, const scene_bvh& bvh,
     auto points = std::vector<trace_roulette_point>{};
     auto rays   = (int64_t)0;
     auto walk   = trace_walk{scene, bvh, context, pilot, pilot_threshold, rays, nullptr, &points};
+    auto shadows = std::vector<trace_shadow_record>{};
+    if (params.allocation) walk.shadows = &shadows;
     for (auto row = begin; row < end; row++) {
       auto& sums = rows[row];
       sums       = {};
+      shadows.clear();
       auto j     = std::min((int)row * stride + stride / 2, size.y - 1);
       for (auto column = 0; column < nx; column++) {
         auto i     = std::min(column * stride + stride / 2, size.x - 1);
@@ -794,6 +900,7 @@ trace_pilot run_trace_pilot(const scene_data& scene, const scene_bvh& bvh,
         sums[0] += glm::dot(difference, difference) / 3;
         sums[1] += 1;
       }
+      if (params.allocation) row_shadows[row] = shadows;
     }
   });
   auto totals = std::array<double, 7>{};
@@ -818,6 +925,9 @@ trace_pilot run_trace_pilot(const scene_data& scene, const scene_bvh& bvh,
   auto threshold = std::sqrt(pixel_variance / pixel_cost) / std::sqrt(tail_moment / tail_cost);
   if (!std::isfinite(threshold)) return pilot_result;
   pilot_result.roulette_threshold = (float)std::clamp(threshold, 1.0 / 16, 1.0);
+  if (params.allocation)
+    pilot_result.allocation =
+        make_trace_allocation(row_shadows, std::sqrt(pixel_variance / pixel_cost));
   return pilot_result;
 }
 
@@ -831,7 +941,8 @@ float estimate_roulette_threshold(const scene_data& scene, const scene_bvh& bvh,
 // 7 x 7 box; then the rates by bisection on their scale, so that the
 // render's estimated rays stay within those of one path a pixel sample.
 std::vector<float> estimate_sample_rates(const scene_data& scene, const scene_bvh& bvh,
-    const trace_context& context, const trace_params& params, float roulette_threshold) {
+    const trace_context& context, const trace_params& params, float roulette_threshold,
+    const trace_allocation* allocation) {
   auto  size   = camera_resolution(scene.cameras[params.camera], params.resolution);
   auto& camera = scene.cameras[params.camera];
   auto  pixels = (size_t)size.x * size.y;
@@ -841,7 +952,8 @@ std::vector<float> estimate_sample_rates(const scene_data& scene, const scene_bv
   auto seed = hash_uint64(params.seed ^ 0x7261746573ULL);  // "rates"
   parallel_chunks(size.y, 1, params.threads, [&](int64_t begin, int64_t end) {
     auto rays = (int64_t)0;
-    auto walk = trace_walk{scene, bvh, context, pilot, roulette_threshold, rays};
+    auto walk = trace_walk{
+        scene, bvh, context, pilot, roulette_threshold, rays, nullptr, nullptr, nullptr, allocation};
     for (auto j = (int)begin; j < (int)end; j++) {
       for (auto i = 0; i < size.x; i++) {
         auto pixel    = (int64_t)j * size.x + i;
@@ -947,8 +1059,10 @@ static void trace_rows(trace_state& state, const scene_data& scene, const scene_
     auto rays = (int64_t)0, nonfinite = (int64_t)0, clamped = (int64_t)0;
     auto energy = 0.0, clamped_energy = 0.0;
     auto record = records ? &(*records)[j] : nullptr;
-    auto walk   = trace_walk{
-        scene, bvh, context, split_params, state.roulette_threshold, rays, record};
+    auto tally  = trace_tally{};
+    auto walk   = trace_walk{scene, bvh, context, split_params, state.roulette_threshold, rays,
+        record, nullptr, nullptr, state.allocation.cells.x > 0 ? &state.allocation : nullptr,
+        &tally};
     for (auto i = 0; i < state.width; i++) {
       auto pixel = j * state.width + i;
       auto& sum  = state.sums[pixel];
@@ -1017,6 +1131,9 @@ static void trace_rows(trace_state& state, const scene_data& scene, const scene_
       }
     }
     state.rays += rays;
+    state.vertices += tally.vertices;
+    state.light_samples += tally.light_samples;
+    state.shadow_rays += tally.shadow_rays;
     state.nonfinite += nonfinite;
     state.clamped += clamped;
     state.row_energy[j] += energy;
@@ -1041,11 +1158,18 @@ static void init_roulette_threshold(trace_state& state, const scene_data& scene,
     pilot               = run_trace_pilot(scene, bvh, context, params);
     state.adaptive_gain = pilot.adaptive_gain;
   }
+  auto lights = paths_sample_lights(params, context);
+  if (params.allocation && lights && pilot.allocation.cells.x == 0) {
+    pilot               = run_trace_pilot(scene, bvh, context, params);
+    state.adaptive_gain = pilot.adaptive_gain;
+  }
   state.roulette_threshold = params.roulette_threshold > 0 ? params.roulette_threshold
                                                            : pilot.roulette_threshold;
-  auto lights = paths_sample_lights(params, context);
+  state.allocation = pilot.allocation;
+  auto allocation  = state.allocation.cells.x > 0 ? &state.allocation : nullptr;
   if (use_adaptive_sampling(params, pilot.adaptive_gain, lights))
-    state.rates = estimate_sample_rates(scene, bvh, context, params, state.roulette_threshold);
+    state.rates = estimate_sample_rates(
+        scene, bvh, context, params, state.roulette_threshold, allocation);
   state.split = choose_path_split(params, !state.rates.empty(), lights);
 }
 

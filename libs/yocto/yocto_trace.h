@@ -87,6 +87,9 @@ struct trace_params {
   hair_sampling_params hair_sampling = {};  // options of the hair BSDF (yocto_shading)
   // Also sum the AOVs of every sample (see AOVS below).
   bool               aovs       = false;
+  // Shadow rays allocated per region of the scene by what the pilot learned
+  // (see trace_allocation); off: params.shadow_threshold's roulette.
+  bool               allocation = true;
 };
 
 }  // namespace yocto
@@ -118,6 +121,9 @@ struct trace_context {
   // Slot of each pair in the global Sobol point, -1 for padded pairs
   // (sequence_type::global_sobol only).
   std::vector<int8_t>           sequence_slots       = {};
+  // Whether a light to sample has area (an MIS weight then needs the BSDF's
+  // pdf); distant lights alone are deltas, which BSDF samples never find.
+  bool                          mis_lights           = false;
 };
 
 trace_context make_trace_context(const scene_data& scene, const trace_params& params = {});
@@ -128,6 +134,29 @@ trace_context make_trace_context(const scene_data& scene, const trace_params& pa
 // RENDERING
 // -----------------------------------------------------------------------------
 namespace yocto {
+
+// Where a render casts shadow rays, per region of the scene: Rath et al.
+// 2022 (EARS) give a sample of cost c whose contribution has second moment
+// M2 the probability q = sqrt(M2 / c) / sqrt(V / C) of being taken that
+// maximises the image's efficiency, 1 / (MSE x cost), V and C the variance
+// and cost of a pixel sample; Meyer et al. 2024 (MARS) apply it to each
+// sampling technique of a vertex on its own. For a light sample that would
+// add c if visible, in a region where a fraction P of shadow rays reach
+// their light, M2 = c^2 P and the cost is one ray: its shadow ray is cast
+// with probability min(1, c sqrt(P) / sqrt(V / C)) and weighted up by its
+// inverse. P is averaged over the cells of a grid over the shadow rays the
+// pilot cast, each cell's count shrunk towards the whole scene's by a prior.
+struct trace_allocation {
+  bbox3f             bounds          = {};
+  vec3i              cells           = {0, 0, 0};  // per axis; 0 for no grid
+  vec3f              cell_scale      = {0, 0, 0};  // cells per unit length
+  float              pixel_deviation = 0;          // sqrt(V / C)
+  std::vector<float> visibility      = {};         // per cell: sqrt(P)
+};
+
+// The cell of a point in the allocation's grid (points outside the pilot's
+// bounds take the nearest cell); -1 without a grid.
+int find_allocation_cell(const trace_allocation& allocation, const vec3f& position);
 
 // The image being rendered: sums of samples per pixel and counters.
 // The render so far: samples first ... first + samples - 1 of every pixel,
@@ -155,6 +184,13 @@ struct trace_state {
   float                      adaptive_gain = 0;
   // Paths per camera ray: params.split or the render's choice (0 until set).
   int                        split = 0;
+  // The shadow rays' allocation (params.allocation; no cells until set).
+  trace_allocation           allocation = {};
+  // What paths did: scattering vertices, light samples there that would
+  // add light if visible, and the shadow rays cast for them.
+  std::atomic<int64_t>       vertices      = 0;
+  std::atomic<int64_t>       light_samples = 0;
+  std::atomic<int64_t>       shadow_rays   = 0;
   // Paths per sample of each pixel with adaptive sampling (empty until set,
   // and without it): an integer m >= 1 (m paths, each weighing 1 / m), or 1 / q
   // for q a power of two (one path every q samples, weighing q).
@@ -188,8 +224,9 @@ float estimate_roulette_threshold(const scene_data& scene, const scene_bvh& bvh,
 // fell as 1 / samples: mean(v) mean(c) / mean(sqrt(v c))^2 over the pilot's
 // pixels, v the variance of one path (of its 16) and c its rays.
 struct trace_pilot {
-  float roulette_threshold = 1;
-  float adaptive_gain      = 1;
+  float            roulette_threshold = 1;
+  float            adaptive_gain      = 1;
+  trace_allocation allocation         = {};  // with params.allocation
 };
 trace_pilot run_trace_pilot(const scene_data& scene, const scene_bvh& bvh,
     const trace_context& context, const trace_params& params);
@@ -228,7 +265,8 @@ int choose_path_split(const trace_params& params, bool adaptive, bool samples_li
 // averaged over 7 x 7 pixels. A pure function of the scene, the parameters,
 // the threshold and the seed, as the roulette's pilot.
 std::vector<float> estimate_sample_rates(const scene_data& scene, const scene_bvh& bvh,
-    const trace_context& context, const trace_params& params, float roulette_threshold);
+    const trace_context& context, const trace_params& params, float roulette_threshold,
+    const trace_allocation* allocation = nullptr);
 
 // Empty sums for the camera's image; the samples will start at `first`.
 void init_trace_state(trace_state& state, const scene_data& scene, const trace_params& params,
