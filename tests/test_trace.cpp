@@ -1059,7 +1059,7 @@ TEST(trace, adaptive_sample_numbers_are_checked) {
 
 TEST(trace, automatic_split_follows_adaptive_sampling_and_lights) {
   // The rule: a split that is set is kept; automatic, 2 paths per camera ray
-  // where the render samples adaptively and samples no light, else 1.
+  // where the render samples adaptively and samples no light with area, else 1.
   auto params  = trace_params{};
   params.split = 3;
   EXPECT_EQ(choose_path_split(params, false, true), 3);
@@ -1084,6 +1084,14 @@ TEST(trace, automatic_split_follows_adaptive_sampling_and_lights) {
   EXPECT_TRUE(set.sums == automatic.sums);
   params.split    = 0;
   params.adaptive = trace_adaptive_type::off;
+  EXPECT_EQ(render_scene(scene, params).split, 1);
+  // A sun is sampled but has no area: adaptive renders still split; a
+  // textured sky (a light with area) does not.
+  params.adaptive = trace_adaptive_type::on;
+  EXPECT_EQ(render_scene(make_sun_hair_scene(), params).split, 2);
+  auto lit           = make_lit_scene();
+  scene.textures     = lit.textures;
+  scene.environments = lit.environments;
   EXPECT_EQ(render_scene(scene, params).split, 1);
 }
 

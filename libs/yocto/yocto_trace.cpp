@@ -607,17 +607,17 @@ static const float adaptive_auto_min_split_gain = 1.4f;
 static const int   adaptive_auto_max_samples    = 64;
 
 bool use_adaptive_sampling(
-    const trace_params& params, float adaptive_gain, bool samples_lights) {
+    const trace_params& params, float adaptive_gain, bool area_lights) {
   if (params.adaptive != trace_adaptive_type::automatic)
     return params.adaptive == trace_adaptive_type::on;
-  auto with_split = !samples_lights && params.split != 1;
+  auto with_split = !area_lights && params.split != 1;
   return params.samples <= adaptive_auto_max_samples &&
          adaptive_gain >= (with_split ? adaptive_auto_min_split_gain : adaptive_auto_min_gain);
 }
 
-int choose_path_split(const trace_params& params, bool adaptive, bool samples_lights) {
+int choose_path_split(const trace_params& params, bool adaptive, bool area_lights) {
   if (params.split > 0) return params.split;
-  return adaptive && !samples_lights ? 2 : 1;
+  return adaptive && !area_lights ? 2 : 1;
 }
 
 // Whether the render may sample adaptively, before its pilot says.
@@ -1152,14 +1152,12 @@ static void init_roulette_threshold(trace_state& state, const scene_data& scene,
   if (state.roulette_threshold > 0) return;
   // The pilot when the threshold or the choice of adaptive sampling needs it
   // (a render of more samples than the automatic choice allows needs no gain).
-  auto pilot = trace_pilot{};
-  if (params.roulette_threshold <= 0 || (params.adaptive == trace_adaptive_type::automatic &&
-                                            may_use_adaptive_sampling(params))) {
-    pilot               = run_trace_pilot(scene, bvh, context, params);
-    state.adaptive_gain = pilot.adaptive_gain;
-  }
+  // (And where the shadow rays' allocation needs it.)
+  auto pilot  = trace_pilot{};
   auto lights = paths_sample_lights(params, context);
-  if (params.allocation && lights && pilot.allocation.cells.x == 0) {
+  if (params.roulette_threshold <= 0 ||
+      (params.adaptive == trace_adaptive_type::automatic && may_use_adaptive_sampling(params)) ||
+      (params.allocation && lights)) {
     pilot               = run_trace_pilot(scene, bvh, context, params);
     state.adaptive_gain = pilot.adaptive_gain;
   }
@@ -1167,10 +1165,13 @@ static void init_roulette_threshold(trace_state& state, const scene_data& scene,
                                                            : pilot.roulette_threshold;
   state.allocation = pilot.allocation;
   auto allocation  = state.allocation.cells.x > 0 ? &state.allocation : nullptr;
-  if (use_adaptive_sampling(params, pilot.adaptive_gain, lights))
+  // The split and its adaptive sampling where no light with area is
+  // sampled (a constant sky, distant lights).
+  auto area_lights = lights && context.mis_lights;
+  if (use_adaptive_sampling(params, pilot.adaptive_gain, area_lights))
     state.rates = estimate_sample_rates(
         scene, bvh, context, params, state.roulette_threshold, allocation);
-  state.split = choose_path_split(params, !state.rates.empty(), lights);
+  state.split = choose_path_split(params, !state.rates.empty(), area_lights);
 }
 
 void trace_samples(trace_state& state, const scene_data& scene, const scene_bvh& bvh,
