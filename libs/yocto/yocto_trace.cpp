@@ -5,6 +5,7 @@
 #include "yocto_trace.h"
 
 #include <limits>
+#include <tuple>
 #include <pmmintrin.h>
 #include <tbb/blocked_range.h>
 #include <xmmintrin.h>

@@ -17,9 +17,12 @@
 // (Rath et al. 2022, EARS, with one global estimate of each term: see
 // estimate_roulette_threshold); the pilot is a pure function of the scene,
 // the parameters and the seed, so every part of a split render finds the same
-// threshold. Where no MIS weight needs a BSDF pdf (no light to sample), a
-// sampled hair direction takes its lobe's own weight A_p / P(p), and the
-// lobes are not evaluated. With adaptive sampling (params.adaptive; by
+// threshold. The same pilot learns, per region of the scene, how often a
+// shadow ray reaches its light, and light samples cast their shadow ray with
+// the probability that maximises efficiency (see trace_allocation). Where no
+// MIS weight needs a BSDF pdf (no light with area to sample: a constant sky,
+// distant lights), a sampled hair direction takes its lobe's own weight
+// A_p / P(p), and the lobes are not evaluated. With adaptive sampling (params.adaptive; by
 // default where the first pilot predicts that it pays), a second pilot gives
 // each pixel more or fewer paths a sample by its variance and cost (see
 // estimate_sample_rates), a pure function of the same inputs.
