@@ -28,11 +28,13 @@ static int run_main(int argc, const char** argv) {
   auto merge_opts   = merge_options{};
   auto convert_opts = convert_options{};
   auto hair_cmd     = hair_command{};
+  auto serve_cmd    = serve_command{};
   auto render       = add_render_command(app, render_cmd, max_memory);
   auto info         = add_info_command(app, info_opts, max_memory);
   auto merge        = add_merge_command(app, merge_opts, max_memory);
   auto convert      = add_convert_command(app, convert_opts, max_memory);
   auto hair         = add_hair_command(app, hair_cmd, max_memory);
+  auto serve        = add_serve_command(app, serve_cmd, max_memory);
 
   try {
     app.parse(argc, argv);
@@ -50,6 +52,7 @@ static int run_main(int argc, const char** argv) {
   if (info->parsed()) return run_info(info_opts);
   if (hair->parsed()) return run_hair(hair_cmd);
   if (convert->parsed()) return run_convert(convert_opts);
+  if (serve->parsed()) return run_serve(serve_cmd, *serve);
   return 1;
 }
 

@@ -115,6 +115,27 @@ CLI::App* add_render_command(CLI::App& app, render_command& command, std::string
 int run_render(const render_command& command, const CLI::App& cli);
 
 // -----------------------------------------------------------------------------
+// SERVE
+// -----------------------------------------------------------------------------
+
+struct serve_options {
+  std::string scene      = "";
+  std::string host       = "127.0.0.1";
+  int         port       = 8000;
+  std::string camera     = "";
+  std::string output_dir = ".";
+};
+
+// What `serve` reads: its options and the tracer's parameters.
+struct serve_command {
+  serve_options       options = {};
+  yocto::trace_params params  = {};
+};
+
+CLI::App* add_serve_command(CLI::App& app, serve_command& command, std::string& max_memory);
+int       run_serve(const serve_command& command, const CLI::App& cli);
+
+// -----------------------------------------------------------------------------
 // MERGE
 // -----------------------------------------------------------------------------
 

@@ -3,8 +3,6 @@
 // for yscene merge.
 //
 
-#include <sys/resource.h>
-
 #include <atomic>
 #include <charconv>
 #include <chrono>
@@ -14,6 +12,7 @@
 #include <functional>
 #include <new>
 #include <yocto/yocto_bvh.h>
+#include <yocto/yocto_render.h>
 
 #include "yocto_source_hash.h"  // generated from the sources: YOCTO_SOURCE_HASH
 #include "yscene_cli.h"
@@ -33,21 +32,6 @@ static std::string format_duration(double seconds) {
   return buffer;
 }
 
-// Peak resident memory of this process in bytes.
-static int64_t peak_memory() {
-  auto usage = rusage{};
-  getrusage(RUSAGE_SELF, &usage);
-  return (int64_t)usage.ru_maxrss * 1024;
-}
-
-// CPU time of this process (user and system) in seconds.
-static double cpu_seconds() {
-  auto usage = rusage{};
-  getrusage(RUSAGE_SELF, &usage);
-  return usage.ru_utime.tv_sec + usage.ru_utime.tv_usec * 1e-6 + usage.ru_stime.tv_sec +
-         usage.ru_stime.tv_usec * 1e-6;
-}
-
 // The first Ctrl-C asks the render to stop after its pass; a second one,
 // while that pass or loading still runs, ends the program as usual.
 static std::atomic<bool> interrupted = false;
@@ -64,8 +48,6 @@ static std::string checkpoint_filename(const std::string& output, int samples) {
   return output.substr(0, output.size() - extension.size()) + suffix + extension;
 }
 
-static bool is_power_of_two(int n) { return n > 0 && (n & (n - 1)) == 0; }
-
 // The limit of the renderer's speed: renders the samples (timed), records the
 // same rays again (the render is deterministic) and casts them through Embree
 // alone (timed, median of three). Prints both rates and their ratio.
@@ -74,9 +56,9 @@ static int run_raycast(const render_options& options, const scene_data& scene,
   auto state = trace_state{};
   init_trace_state(state, scene, params);
   auto start = std::chrono::steady_clock::now();
-  auto cpu   = cpu_seconds();
+  auto cpu   = process_cpu_seconds();
   trace_samples(state, scene, bvh, context, params, params.samples);
-  auto render_time = seconds_since(start), render_cpu = cpu_seconds() - cpu;
+  auto render_time = seconds_since(start), render_cpu = process_cpu_seconds() - cpu;
   auto render_rays = (double)state.rays;
   init_trace_state(state, scene, params);
   auto rays = record_trace_rays(state, scene, bvh, context, params, params.samples);
@@ -86,10 +68,10 @@ static int run_raycast(const render_options& options, const scene_data& scene,
   auto hits  = (int64_t)0;
   for (auto run = 0; run < 3; run++) {
     auto run_start = std::chrono::steady_clock::now();
-    auto run_cpu   = cpu_seconds();
+    auto run_cpu   = process_cpu_seconds();
     hits           = cast_trace_rays(bvh, rays, params.threads);
     times.push_back(seconds_since(run_start));
-    cpus.push_back(cpu_seconds() - run_cpu);
+    cpus.push_back(process_cpu_seconds() - run_cpu);
   }
   std::sort(times.begin(), times.end());
   std::sort(cpus.begin(), cpus.end());
@@ -254,7 +236,7 @@ static bool parse_sample_range(
   return true;
 }
 
-// Loads, checks, builds the BVH, renders in passes and saves.
+// Loads, checks, builds the BVH, renders in passes (a render session) and saves.
 static int render_scene(const render_options& options, trace_params params,
     const CLI::App& command) try {
   auto is_part = !options.sample_range.empty();
@@ -276,144 +258,72 @@ static int render_scene(const render_options& options, trace_params params,
   // first, if it comes while loading) and saves the samples done.
   interrupted   = false;
   auto previous = std::signal(SIGINT, handle_sigint);
-  auto start    = std::chrono::steady_clock::now();
-  auto scene    = scene_data{};
-  auto error = std::string{};
-  if (!load_any_scene(options.scene, scene, error, with_memory_limit()))
-    return print_error(error);
+  auto settings = render_session_params{};
+  settings.scene            = options.scene;
+  settings.camera           = options.camera;
+  settings.samples_given    = command.count("--samples") > 0;
+  settings.bounces_given    = command.count("--bounces") > 0;
+  settings.resolution_given = command.count("--resolution") > 0;
+  settings.line_segments    = options.curves == "lines" ? options.segments : 0;
+  settings.bvh.flat_curves  = options.flat_curves;
+  settings.bvh.flatten      = !options.no_flatten;
+  settings.bvh.quality = enum_from_name<bvh_quality_type>(bvh_quality_names, options.bvh_quality);
+  settings.bvh.embree_config    = options.embree_config;
+  settings.bvh.compact          = options.bvh_compact;
+  settings.bvh.max_curve_pieces = options.curve_pieces;
+  settings.curve_pieces_given   = command.count("--curve-pieces") > 0;
+  settings.max_memory           = memory_limit;
+  auto session = render_session{};
+  auto error   = std::string{};
+  // The samples to render: all, or the part's range (of the samples the
+  // scene's settings may give).
+  if (!load_render_session(session, settings, params, error)) return print_error(error);
+  if (is_part) {
+    if (!parse_sample_range(options.sample_range, session.params.samples, session.first,
+            settings.end, error))
+      return print_error(error);
+    session.settings.first = session.first;
+    session.settings.end   = settings.end;
+    session.count          = settings.end - session.first;
+  }
   if (!make_output_directory(options.output, error)) return print_error(error);
-  add_missing_camera(scene);
-  if (options.curves == "lines") {
-    for (auto& shape : scene.shapes)
-      if (!shape.curves.empty()) shape = curves_to_lines(shape, options.segments);
-  }
-  // Settings carried by the scene file are defaults the command line overrides.
-  if (scene.settings.samples > 0 && command.count("--samples") == 0)
-    params.samples = scene.settings.samples;
-  if (scene.settings.bounces > 0 && command.count("--bounces") == 0)
-    params.bounces = scene.settings.bounces;
-  if (scene.settings.resolution > 0 && command.count("--resolution") == 0)
-    params.resolution = scene.settings.resolution;
-  if (!options.camera.empty()) {
-    auto found = std::find(scene.camera_names.begin(), scene.camera_names.end(), options.camera);
-    if (found == scene.camera_names.end())
-      return print_error(options.scene + ": no camera named " + options.camera);
-    params.camera = (int)(found - scene.camera_names.begin());
-  }
-  if (!check_trace_params(scene, params, error)) return print_error(options.scene + ": " + error);
-  // The samples to render: all, or the part's range.
-  auto first = 0, end = params.samples;
-  if (is_part && !parse_sample_range(options.sample_range, params.samples, first, end, error))
-    return print_error(error);
-  auto count = end - first;
-  // The image buffers, before they are allocated.
-  auto size = camera_resolution(scene.cameras[params.camera], params.resolution);
-  auto from = command.count("--resolution") ? std::string(" (--resolution)")
-                                            : std::string(" (the scene's settings)");
-  if (!check_load_memory(options.scene,
-          "a render at resolution " + std::to_string(params.resolution) + from + ", " +
-              std::to_string(size.x) + "x" + std::to_string(size.y) + " pixels,",
-          trace_image_bytes(scene, params), memory_limit, error))
-    return print_error(error);
-  if (!check_render_output(options, params, error)) return print_error(error);
-  auto load_time = seconds_since(start);
-  // Fibres in Embree's layout: the BVH reads them in place (no vertex copy).
-  pack_fiber_vertices(scene);
-
-  auto bvh        = scene_bvh{};
-  auto bvh_params_ = bvh_params{};
-  bvh_params_.flat_curves = options.flat_curves;
-  bvh_params_.flatten     = !options.no_flatten;
-  bvh_params_.quality     = enum_from_name<bvh_quality_type>(bvh_quality_names,
-      options.bvh_quality);
-  bvh_params_.embree_config = options.embree_config;
-  bvh_params_.compact       = options.bvh_compact;
-  bvh_params_.max_curve_pieces = options.curve_pieces;
-  // The BVH takes what the memory budget leaves after the scene and the
-  // image. Over it, the build is tried again with half the curve pieces (the
-  // same curves, looser bounds: slower rays), then in the compact layout, and
-  // fails with a message only then. `built` says what was used: the parts'
-  // settings record it.
-  auto scene_bytes = 0.0;
-  for (auto& shape : scene.shapes) scene_bytes += shape_memory(shape);
-  for (auto& texture : scene.textures) scene_bytes += texture.pixels.size() * sizeof(vec3f);
-  bvh_params_.max_bytes = memory_limit - scene_bytes - trace_image_bytes(scene, params);
-  if (!(bvh_params_.max_bytes > 0))
-    return print_error(options.scene + ": the scene and the image leave no memory for the "
-                                       "BVH within the memory budget (raise --max-memory)");
-  // The curve pieces, planned: none when the render's rays (about two a
-  // sample, over all of its samples, whatever part this is, so that the
-  // parts of one render agree) do not repay their build; the most bent
-  // segments first within the budget. --curve-pieces given is kept even when
-  // it does not repay, within the budget still.
-  auto built        = options;
-  auto planned_rays = 2.0 * size.x * size.y * params.samples;
-  if (command.count("--curve-pieces")) planned_rays = 1e30;
-  auto plan = plan_curve_pieces(scene, bvh_params_, planned_rays, bvh_params_.max_bytes);
-  bvh_params_.max_curve_pieces      = plan.max_pieces;
-  bvh_params_.curve_piece_threshold = plan.threshold;
-  built.curve_pieces                = plan.max_pieces;
-  built.curve_piece_threshold       = plan.threshold;
-  while (!make_scene_bvh(bvh, scene, bvh_params_, error)) {
-    if (!bvh.over_budget) return print_error(options.scene + ": " + error);
-    if (bvh_params_.max_curve_pieces > 1) {
-      bvh_params_.max_curve_pieces /= 2;
-    } else if (!bvh_params_.compact) {
-      bvh_params_.compact = true;
-    } else {
-      return print_error(options.scene + ": " + error + ", with one piece a curve and the "
-                         "compact layout (raise --max-memory)");
-    }
-    std::fprintf(stderr, "warning: %s: %s; building it again with %d curve pieces%s\n",
-        options.scene.c_str(), error.c_str(), bvh_params_.max_curve_pieces,
-        bvh_params_.compact ? ", compact" : "");
-    built.curve_pieces = bvh_params_.max_curve_pieces;
-    built.bvh_compact  = bvh_params_.compact;
-  }
-  auto context = make_trace_context(scene, params);
-  if (options.embree_only) return run_raycast(options, scene, bvh, context, params);
-  auto state  = trace_state{};
-  init_trace_state(state, scene, params, first);
+  if (!check_render_output(options, session.params, error)) return print_error(error);
+  auto warnings = std::vector<std::string>{};
+  auto built_ok = build_render_session(session, error, &warnings);
+  for (auto& warning : warnings) std::fprintf(stderr, "warning: %s\n", warning.c_str());
+  if (!built_ok) return print_error(error);
+  auto& scene = session.scene;
+  auto& state = session.state;
+  params      = session.params;
+  // What the BVH was built with, for the parts' settings.
+  auto built                  = options;
+  built.curve_pieces          = session.built.max_curve_pieces;
+  built.curve_piece_threshold = session.built.curve_piece_threshold;
+  built.bvh_compact           = session.built.compact;
+  if (options.embree_only)
+    return run_raycast(options, scene, session.bvh, session.context, params);
   if (!options.quiet)
     std::fprintf(stderr, "loaded %s in %.2fs, bvh in %.2fs (%s bytes); rendering %dx%d\n",
-        options.scene.c_str(), load_time, bvh.build_seconds,
-        format_count((double)bvh.peak_memory).c_str(), state.width, state.height);
+        options.scene.c_str(), session.load_seconds, session.bvh.build_seconds,
+        format_count((double)session.bvh.peak_memory).c_str(), state.width, state.height);
 
-  // Passes of samples: Ctrl-C ends the current pass and saves. A pass ends
-  // on a power of two (the checkpoints and the time budget stop there) and
-  // takes up to about two seconds at the speed of the passes so far. A
-  // pixel's samples in a row find its fibres and BVH nodes still in the
-  // cache: 2.5-10% less CPU on the peers' hair balls at 64 spp than one
-  // sample per pixel per pass (6% with one thread). Each sample is the same
-  // whatever the pass.
-  auto render_start   = std::chrono::steady_clock::now();
-  auto render_cpu     = cpu_seconds();
-  auto last_progress  = -1.0;
+  // Passes of samples: Ctrl-C ends the current pass and saves.
+  auto last_progress = -1.0;
+  auto count         = session.count;
   while (state.samples < count && (state.samples == 0 || !interrupted)) {
-    auto pass = 1;
-    if (state.samples > 0) {
-      auto per_sample = seconds_since(render_start) / state.samples;
-      auto aligned    = state.samples & -state.samples;  // the next power of two stays a step
-      while (pass * 2 <= aligned && pass * 2 * per_sample <= 2.0) pass *= 2;
-    }
-    trace_samples(state, scene, bvh, context, params, std::min(pass, count - state.samples));
-    auto elapsed = seconds_since(render_start);
+    render_session_pass(session);
+    auto elapsed = session.seconds;
     if (options.checkpoints && is_power_of_two(state.samples)) {
-      // Saving is not rendering: its time is left out of the figures.
-      auto save_start = std::chrono::steady_clock::now();
-      auto filename   = checkpoint_filename(options.output, state.samples);
+      auto filename = checkpoint_filename(options.output, state.samples);
       auto layers   = get_aov_layers(state);
       if (!save_render_image(filename, get_image(state), layers, error, options.exposure))
         return print_error(error);
       std::printf("checkpoint spp=%d seconds=%.6f cpu_seconds=%.6f rays=%lld file=%s\n",
-          state.samples, elapsed, cpu_seconds() - render_cpu, (long long)state.rays.load(),
+          state.samples, elapsed, session.cpu_seconds, (long long)state.rays.load(),
           filename.c_str());
       std::fflush(stdout);
-      render_start += std::chrono::steady_clock::now() - save_start;
     }
-    if (options.time_budget > 0 && elapsed >= options.time_budget &&
-        is_power_of_two(state.samples))
-      break;
+    if (is_render_session_done(session, options.time_budget)) break;
     if (!options.quiet && (elapsed - last_progress > 0.25 || state.samples == count)) {
       last_progress = elapsed;
       auto fraction = (double)state.samples / count;
@@ -426,8 +336,7 @@ static int render_scene(const render_options& options, trace_params params,
     }
   }
   std::signal(SIGINT, previous);
-  auto render_time = seconds_since(render_start);
-  render_cpu       = cpu_seconds() - render_cpu;
+  auto render_time = session.seconds;
   if (!options.quiet) std::fprintf(stderr, "\n");
   if (interrupted)
     std::fprintf(stderr, "interrupted: saving the %d samples per pixel done\n", state.samples);
@@ -437,7 +346,8 @@ static int render_scene(const render_options& options, trace_params params,
 
   // A part keeps the exact sums of the samples done (all of its range,
   // unless interrupted: a merge then reports the gap).
-  auto part = render_part{};
+  auto first = session.first;
+  auto part  = render_part{};
   if (is_part) {
     part.settings  = render_settings(scene, params, built, state);
     part.samples   = params.samples;
@@ -481,7 +391,7 @@ static int render_scene(const render_options& options, trace_params params,
         what.c_str(), state.width, state.height, state.samples, render_time,
         format_count(samples / render_time).c_str(),
         format_count((double)state.rays / render_time).c_str(),
-        format_count((double)peak_memory()).c_str());
+        format_count((double)process_peak_memory()).c_str());
     // Clamping biases the image: say by how much.
     if (params.clamp > 0)
       std::printf("clamp %g: %lld of %s samples clamped, removing %.3g%% of their energy "
@@ -489,29 +399,7 @@ static int render_scene(const render_options& options, trace_params params,
           params.clamp, (long long)state.clamped.load(), format_count(samples).c_str(),
           100 * clamped_energy_fraction(state));
   }
-  if (options.stats) {
-    auto segments = (size_t)0;
-    auto pieces   = (size_t)0;  // the curves Embree got for them
-    for (auto i = 0; i < (int)scene.shapes.size(); i++) {
-      auto& shape = scene.shapes[i];
-      segments += shape.lines.size() + num_curves(shape);
-      pieces += bvh.pieces[i].pieces.empty() ? num_curves(shape) : bvh.pieces[i].pieces.size();
-    }
-    std::printf("stats load_seconds=%.6f bvh_seconds=%.6f bvh_bytes=%lld segments=%zu "
-                "bvh_build_peak_bytes=%lld curve_pieces=%zu width=%d height=%d spp=%d "
-                "render_seconds=%.6f render_cpu=%.6f rays=%lld peak_memory=%lld clamped=%lld "
-                "clamped_energy=%.6g roulette_threshold=%.6g adaptive=%d adaptive_gain=%.4g split=%d "
-                "allocation_cells=%d vertices=%lld light_samples=%lld shadow_rays=%lld\n",
-        load_time, bvh.build_seconds, (long long)bvh.peak_memory, segments,
-        (long long)bvh.build_peak_memory, pieces, state.width,
-        state.height, state.samples, render_time, render_cpu, (long long)state.rays.load(),
-        (long long)peak_memory(), (long long)state.clamped.load(),
-        clamped_energy_fraction(state), state.roulette_threshold, state.rates.empty() ? 0 : 1,
-        state.adaptive_gain, state.split,
-        state.allocation.cells.x * state.allocation.cells.y * state.allocation.cells.z,
-        (long long)state.vertices.load(), (long long)state.light_samples.load(),
-        (long long)state.shadow_rays.load());
-  }
+  if (options.stats) std::printf("%s\n", format_render_stats(session).c_str());
   return 0;
 } catch (const std::bad_alloc&) {
   // Past the budget's checks (the BVH's included), the system or ulimit -v

@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Installs the Debian 12 packages yocto-hair needs, only those missing, then
 # configures and builds (Release) into build/. python3-distributed is Dask,
-# for scripts/farm.py and its test. With --fuzz, also clang-14
+# for scripts/farm.py and its test; cpp-httplib is yscene serve's server, and
+# Chromium with its driver and Selenium the real browser its page test drives. With --fuzz, also clang-14
 # and libFuzzer, which scripts/fuzz.sh needs. With --denoise, also Debian's
 # OpenImageIO and NumPy for Python and a venv, .venv/denoise, that sees them
 # and holds pyoidn (Intel Open Image Denoise from PyPI) for scripts/denoise.py.
@@ -19,7 +20,8 @@ done
 
 packages="cmake ninja-build g++ pkg-config libembree-dev libopenimageio-dev
   openimageio-tools libglm-dev nlohmann-json3-dev libtbb-dev libcli11-dev libgtest-dev
-  libbenchmark-dev zlib1g-dev python3-distributed"
+  libbenchmark-dev zlib1g-dev python3-distributed libcpp-httplib-dev
+  chromium chromium-driver python3-selenium"
 if [ $fuzz -eq 1 ]; then
   packages="$packages clang-14 libclang-rt-14-dev libfuzzer-14-dev"
 fi

@@ -1049,9 +1049,9 @@ static trace_pixel_paths get_pixel_paths(const trace_state& state, size_t pixel)
 
 // Adds `count` samples to every pixel of the image rows; with `records`, the
 // rays of row j go to (*records)[j].
-static void trace_rows(trace_state& state, const scene_data& scene, const scene_bvh& bvh,
+static bool trace_rows(trace_state& state, const scene_data& scene, const scene_bvh& bvh,
     const trace_context& context, const trace_params& params, int count,
-    std::vector<std::vector<trace_ray>>* records) {
+    std::vector<std::vector<trace_ray>>* records, const std::atomic<bool>* cancel = nullptr) {
   auto& camera     = scene.cameras[params.camera];
   // The paths take the render's split (params.split may leave it open).
   auto split_params  = params;
@@ -1140,10 +1140,19 @@ static void trace_rows(trace_state& state, const scene_data& scene, const scene_
     state.row_energy[j] += energy;
     state.row_clamped[j] += clamped_energy;
   };
+  auto cancelled = std::atomic<bool>{false};
   parallel_chunks(state.height, 1, params.threads, [&](int64_t begin, int64_t end) {
-    for (auto j = begin; j < end; j++) render_row((int)j);
+    for (auto j = begin; j < end; j++) {
+      if (cancel && cancel->load(std::memory_order_relaxed)) {
+        cancelled = true;
+        return;
+      }
+      render_row((int)j);
+    }
   });
+  if (cancelled) return false;
   state.samples += count;
+  return true;
 }
 
 // The render's roulette threshold: the parameter's, or the pilot's (once).
@@ -1175,10 +1184,11 @@ static void init_roulette_threshold(trace_state& state, const scene_data& scene,
   state.split = choose_path_split(params, !state.rates.empty(), area_lights);
 }
 
-void trace_samples(trace_state& state, const scene_data& scene, const scene_bvh& bvh,
-    const trace_context& context, const trace_params& params, int count) {
+bool trace_samples(trace_state& state, const scene_data& scene, const scene_bvh& bvh,
+    const trace_context& context, const trace_params& params, int count,
+    const std::atomic<bool>* cancel) {
   init_roulette_threshold(state, scene, bvh, context, params);
-  trace_rows(state, scene, bvh, context, params, count, nullptr);
+  return trace_rows(state, scene, bvh, context, params, count, nullptr, cancel);
 }
 
 double clamped_energy_fraction(const trace_state& state) {

@@ -281,9 +281,12 @@ void init_trace_state(trace_state& state, const scene_data& scene, const trace_p
 
 // Adds `count` samples to every pixel (samples first + samples ... + count
 // - 1), using params.threads threads. A sample with a NaN or Inf component,
-// or one of fixed_sum_max_sample or more, is dropped and counted.
-void trace_samples(trace_state& state, const scene_data& scene, const scene_bvh& bvh,
-    const trace_context& context, const trace_params& params, int count);
+// or one of fixed_sum_max_sample or more, is dropped and counted. Once
+// `cancel` is set, rows not yet started are skipped: the call returns false
+// and the sums are partial (init_trace_state again before more samples).
+bool trace_samples(trace_state& state, const scene_data& scene, const scene_bvh& bvh,
+    const trace_context& context, const trace_params& params, int count,
+    const std::atomic<bool>* cancel = nullptr);
 
 // The current estimate: sums over samples (with adaptive rates, over the
 // paths each pixel has taken so far, so that any number of samples gives an
