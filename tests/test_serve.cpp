@@ -207,6 +207,12 @@ TEST(serve, bad_requests_are_answered_400_and_change_nothing) {
         server.headers());
     EXPECT_EQ(result->status, 400) << query;
   }
+  for (auto query : {"after=", "after=x", "after=-1", "after=1e3", "after=99999999999"}) {
+    auto result = server.client().Get(("/api/state?" + std::string(query)).c_str(),
+        server.headers());
+    EXPECT_EQ(result->status, 400) << query;
+    EXPECT_EQ(json::parse(result->body, nullptr, false).value("field", ""), "after") << query;
+  }
   auto after = server.get_state();
   EXPECT_EQ(after["generation"], before["generation"]);
   EXPECT_EQ(after["materials"], before["materials"]);
@@ -252,6 +258,30 @@ TEST(serve, a_parameter_change_shows_in_the_next_frames) {
   ASSERT_GT(sum_dark, 0);
   EXPECT_NEAR(sum_bright / sum_dark, 2, 0.1);
   EXPECT_EQ(server.get_state()["generation"], generation);
+}
+
+TEST(serve, a_long_poll_answers_with_the_next_frame) {
+  auto folder = serve_folder{};
+  auto server = test_server{folder, 1 << 20};
+  ASSERT_TRUE(server.wait_frame(0, 1));
+  auto frame = server.get_state()["frame"].get<int>();
+  auto next  = json{};
+  // Each poll answers with a later frame or, after its bounded wait, the
+  // same one; passes of 48 pixels come far sooner than 400 polls' time.
+  for (auto poll = 0; poll < 400 && (next.is_null() || next["frame"].get<int>() <= frame);
+       poll++) {
+    auto result = server.client().Get(
+        ("/api/state?after=" + std::to_string(frame)).c_str(), server.headers());
+    ASSERT_TRUE(result);
+    ASSERT_EQ(result->status, 200) << result->body;
+    next = json::parse(result->body);
+  }
+  EXPECT_GT(next["frame"].get<int>(), frame);
+  // A frame that will not come for a long time: the poll still answers.
+  auto result = server.client().Get("/api/state?after=100000000", server.headers());
+  ASSERT_TRUE(result);
+  EXPECT_EQ(result->status, 200);
+  EXPECT_LT(json::parse(result->body)["frame"].get<int>(), 100000000);
 }
 
 TEST(serve, a_saved_scene_renders_the_served_image) {

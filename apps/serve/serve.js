@@ -381,19 +381,25 @@
     refreshFrame();
   }
 
+  // A long poll: the server answers when a frame after the one we have is
+  // published (or after a quarter of a second), so a new frame shows when
+  // it comes; after an error, a pause before the next try.
   async function poll() {
+    let pause = 0;
     try {
-      const response = await api('/api/state');
+      const response = await api('/api/state' + (state ? '?after=' + state.frame : ''));
       if (response.ok && response.body) {
         clearStatus('connection');
         applyState(response.body);
       } else {
         showStatus(describeError(response), 'connection', true);
+        pause = 500;
       }
     } catch (e) {
       showStatus('server not reachable (' + e.message + ')', 'connection', true);
+      pause = 500;
     }
-    setTimeout(poll, 100);
+    setTimeout(poll, pause);
   }
 
   // ---------------------------------------------------------------------------
@@ -437,8 +443,9 @@
   // The image as large as the viewport allows, its aspect kept.
   function fit() {
     const img = frame();
-    const width = img.naturalWidth || (state && state.width) || 0;
-    const height = img.naturalHeight || (state && state.height) || 0;
+    // The render's size, not the frame's: previews are smaller.
+    const width = (state && state.width) || img.naturalWidth || 0;
+    const height = (state && state.height) || img.naturalHeight || 0;
     if (!width || !height) return;
     const viewport = $('viewport');
     const scale = Math.min(viewport.clientWidth / width, viewport.clientHeight / height);

@@ -6,6 +6,9 @@
 
 #include <httplib.h>
 
+#include <algorithm>
+#include <chrono>
+#include <climits>
 #include <cmath>
 #include <condition_variable>
 #include <cstdio>
@@ -90,6 +93,7 @@ struct serve_state {
   std::mutex                               mutex      = {};
   std::condition_variable                  wake       = {};  // the render thread
   std::condition_variable                  saved      = {};  // requests waiting for a save
+  std::condition_variable                  published  = {};  // requests waiting for a frame
   std::atomic<bool>                        cancel     = false;
   bool                                     stopping   = false;
   serve_edits                              edits      = {};
@@ -110,6 +114,7 @@ static void publish_frame(serve_state& state, std::shared_ptr<serve_frame> frame
   auto lock     = std::lock_guard{state.mutex};
   frame->number = ++state.frames;
   state.frame   = std::move(frame);
+  state.published.notify_all();
 }
 
 static void publish_render(serve_state& state, int generation) {
@@ -127,45 +132,56 @@ static void publish_render(serve_state& state, int generation) {
   publish_frame(state, std::move(frame));
 }
 
-// The first frame after an edit: one sample at a resolution whose pixels
-// take about params.preview_seconds at `pixel_seconds` a pixel sample,
-// blown up to the image's size. Nothing when the full image is about as
-// quick. It reuses the last roulette threshold, so that it runs no pilot.
-static void publish_preview(
-    serve_state& state, int generation, double pixel_seconds, float roulette_threshold) {
-  auto& session = *state.session;
-  auto  width = session.state.width, height = session.state.height;
-  auto  scale = pixel_seconds > 0
-                    ? std::sqrt(state.params.preview_seconds /
-                                (pixel_seconds * (double)width * height))
-                    : 0.25;
-  if (scale >= 0.7) return;
-  auto params       = session.params;
-  params.resolution = std::clamp((int)(params.resolution * scale), 8, params.resolution);
+// One sample per pixel at `scale` of the image's resolution, with the last
+// roulette threshold (so no pilot runs); false if cancelled.
+static bool render_preview(serve_state& state, float scale, float roulette_threshold,
+    texture_data& image, double& seconds) {
+  auto& session     = *state.session;
+  auto  params      = session.params;
+  params.resolution = std::clamp((int)std::lround(params.resolution * scale), 8,
+      params.resolution);
   params.samples    = 1;
   params.adaptive   = trace_adaptive_type::off;
   params.split      = 1;
   params.allocation = false;
   params.aovs       = false;
   if (roulette_threshold > 0) params.roulette_threshold = roulette_threshold;
+  auto start   = std::chrono::steady_clock::now();
   auto preview = trace_state{};
   init_trace_state(preview, session.scene, params);
   if (!trace_samples(preview, session.scene, session.bvh, session.context, params, 1,
           &state.cancel))
-    return;
-  auto small = get_image(preview);
-  auto frame = std::make_shared<serve_frame>();
-  frame->image = texture_data{width, height, std::vector<vec3f>((size_t)width * height)};
-  for (auto j = 0; j < height; j++) {
-    auto sj = std::min(j * small.height / height, small.height - 1);
-    for (auto i = 0; i < width; i++) {
-      auto si = std::min(i * small.width / width, small.width - 1);
-      frame->image.pixels[(size_t)j * width + i] = small.pixels[(size_t)sj * small.width + si];
-    }
+    return false;
+  image   = get_image(preview);
+  seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  return true;
+}
+
+// The first frames after an edit, before its first full pass: previews of
+// one sample at a fraction of the pixels (the page scales them up), the
+// first taking about params.preview_seconds, each next one with four times
+// the pixels while that stays under a quarter of a full pass. An edit can
+// change a sample's cost several times over (light hair scatters longer),
+// so a probe of a few pixels measures it first, not the last pass.
+static void publish_previews(serve_state& state, int generation, float roulette_threshold) {
+  auto& session = *state.session;
+  auto  pixels  = (double)session.state.width * session.state.height;
+  auto  probe   = texture_data{};
+  auto  seconds = 0.0;
+  auto  probe_scale = std::min(1.0f, 32.0f / session.params.resolution);
+  if (!render_preview(state, probe_scale, roulette_threshold, probe, seconds)) return;
+  auto full_pass = seconds * pixels / ((double)probe.width * probe.height);
+  auto scale     = (float)std::sqrt(state.params.preview_seconds / full_pass);
+  for (; scale <= 0.5f; scale *= 2) {
+    auto image = texture_data{};
+    if (!render_preview(state, std::max(scale, probe_scale), roulette_threshold, image, seconds))
+      return;
+    auto frame        = std::make_shared<serve_frame>();
+    frame->image      = std::move(image);
+    frame->generation = generation;
+    frame->preview    = true;
+    publish_frame(state, std::move(frame));
   }
-  frame->generation = generation;
-  frame->preview    = true;
-  publish_frame(state, std::move(frame));
 }
 
 // NAME-NNNN.{exr,png,json} in the output folder, the first number none of
@@ -208,7 +224,6 @@ static bool save_served_render(
 static void run_render_loop(serve_state& state) {
   auto& session       = *state.session;
   auto  applied       = -1;
-  auto  pixel_seconds = 0.0;  // per pixel sample, from the last full pass
   while (true) {
     auto lock = std::unique_lock{state.mutex};
     state.wake.wait(lock, [&] {
@@ -228,7 +243,7 @@ static void run_render_loop(serve_state& state) {
       lock.unlock();
       auto threshold = session.state.roulette_threshold;
       restart_render_session(session);
-      publish_preview(state, applied, pixel_seconds, threshold);
+      publish_previews(state, applied, threshold);
       continue;
     }
     if (!state.saves.empty() && session.state.samples > 0) {
@@ -244,11 +259,7 @@ static void run_render_loop(serve_state& state) {
     }
     lock.unlock();
     if (is_render_session_done(session)) continue;
-    auto before = session.seconds;
-    auto count  = next_pass_samples(session);
     if (!render_session_pass(session, &state.cancel)) continue;  // an edit came
-    auto pixels   = (double)session.state.width * session.state.height;
-    pixel_seconds = (session.seconds - before) / (pixels * count);
     publish_render(state, applied);
   }
   // Requests still waiting for a save learn that it will not come.
@@ -577,9 +588,13 @@ static float filmic_curve(float x) {
 
 // The frame's layer as an image to look at: colour as rendered, normals and
 // tangents from [-1, 1] to [0, 1], one-channel layers as grey.
-static bool frame_layer_image(const serve_frame& frame, const std::string& layer,
-    texture_data& image) {
+static bool frame_layer_image(const serve_state& state, const serve_frame& frame,
+    const std::string& layer, texture_data& image) {
   if (layer == "color") return image = frame.image, true;
+  // A preview renders colour alone: shown for any layer until the next pass.
+  if (frame.preview && std::find(state.layer_names.begin(), state.layer_names.end(), layer) !=
+                           state.layer_names.end())
+    return image = frame.image, true;
   for (auto& found : frame.layers) {
     if (found.name != layer) continue;
     auto channels = (int)found.channels.size();
@@ -619,7 +634,7 @@ static void handle_frame(serve_state& state, const httplib::Request& request,
   }
   if (!frame) return send_error(response, 503, "no frame yet");
   auto image = texture_data{};
-  if (!frame_layer_image(*frame, layer, image))
+  if (!frame_layer_image(state, *frame, layer, image))
     return send_error(response, 400, "layer: no layer " + layer, "layer");
   auto scale = std::exp2(exposure);
   for (auto& pixel : image.pixels) {
@@ -710,6 +725,9 @@ static void add_routes(serve_state& state) {
     return httplib::Server::HandlerResponse::Unhandled;
   });
   http.set_payload_max_length(serve_body_limit);
+  // A response goes out as several writes: without this, Nagle's algorithm
+  // holds the last one for the client's delayed ACK (about 40 ms a request).
+  http.set_tcp_nodelay(true);
   for (auto& asset : serve_assets) {
     auto name = std::string(asset.name);
     auto path = name == "index.html" ? std::string("/") : "/" + name;
@@ -718,8 +736,23 @@ static void add_routes(serve_state& state) {
       response.set_content((const char*)asset.data, asset.size, asset_type(name));
     });
   }
-  http.Get("/api/state", [&state](const httplib::Request&, httplib::Response& response) {
-    auto lock = std::lock_guard{state.mutex};
+  // With ?after=N, a long poll: answers once a frame after frame N is
+  // published (or after serve_poll_milliseconds), so that a page sees a
+  // new frame when it comes rather than at its next poll.
+  http.Get("/api/state", [&state](const httplib::Request& request, httplib::Response& response) {
+    auto after = -1;
+    if (request.has_param("after")) {
+      auto text   = request.get_param_value("after");
+      auto end    = (char*)nullptr;
+      auto number = std::strtoll(text.c_str(), &end, 10);
+      if (text.empty() || *end != 0 || number < 0 || number > INT_MAX)
+        return send_error(response, 400, "after: expected a frame number", "after");
+      after = (int)number;
+    }
+    auto lock = std::unique_lock{state.mutex};
+    if (after >= 0)
+      state.published.wait_for(lock, std::chrono::milliseconds(serve_poll_milliseconds),
+          [&] { return state.stopping || state.frames > after; });
     send_json(response, 200, describe_state(state));
   });
   http.Get("/api/frame.png", [&state](const httplib::Request& request,
@@ -847,6 +880,7 @@ void stop_scene_server(scene_server& server) {
     state->stopping = true;
     state->cancel   = true;
     state->wake.notify_all();
+    state->published.notify_all();
   }
   if (state->render_thread.joinable()) state->render_thread.join();
   state->http.stop();

@@ -6,8 +6,9 @@
 // the frames and edits the hair materials (the controls come from the hair
 // parameter table), the environments' and distant lights' strengths and the
 // camera. An edit cancels the pass in flight, restarts the accumulation
-// without loading or building again, and first publishes a coarse preview
-// (fewer pixels, one sample) sized to a time budget. Saves write the image
+// without loading or building again, and first publishes coarse previews
+// (fewer pixels, one sample; the first sized to a time budget, each next
+// one finer), published at their own size for the page to scale up. Saves write the image
 // and the edited scene into the output folder given at start, on the render
 // thread between passes, so that a save never sees a torn frame.
 //
@@ -16,6 +17,9 @@
 // bodies are at most serve_body_limit bytes; every edit is validated before
 // it changes anything (400 with {"error", "field"} otherwise); static files
 // come from the binary, so no request names a path on disk.
+//
+// Updates: GET /api/state?after=N answers when frame N+1 is published (a
+// long poll, at most serve_poll_milliseconds), so a page needs no timer.
 //
 
 #ifndef YOCTO_SERVE_H_
@@ -33,14 +37,17 @@ namespace yocto {
 
 // Largest request body, in bytes.
 inline const int serve_body_limit = 4096;
+// Longest wait of a long poll of the state (GET /api/state?after=FRAME).
+inline const int serve_poll_milliseconds = 250;
 
 struct serve_params {
   std::string host       = "127.0.0.1";  // where it listens
   int         port       = 8000;         // 0: any free port
   std::string output_dir = ".";          // where saves go
   std::string token      = "";           // "" for a random one
-  // The first frame after an edit: a preview of fewer pixels taking about
-  // this long at the speed of the passes so far.
+  // The first frame after an edit: a preview of one sample at fewer pixels
+  // taking about this long; then previews of four times the pixels while
+  // they take under a quarter of a full pass.
   double preview_seconds = 0.04;
 };
 
