@@ -55,7 +55,6 @@ int run_serve(const serve_command& command, const CLI::App& cli) {
   settings.camera           = options.camera;
   settings.samples_given    = cli.count("--samples") > 0;
   settings.resolution_given = cli.count("--resolution") > 0;
-  settings.pack_fibers      = false;  // saves write the scene: the plain layout
   settings.max_memory       = memory_limit;
   auto session = std::make_unique<render_session>();
   auto error   = std::string{};

@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 #include <yocto/yocto_bvh.h>
 #include <yocto/yocto_hairgen.h>
+#include <yocto/yocto_ply.h>
 #include <yocto/yocto_sampling.h>
 #include <yocto/yocto_scene.h>
 
@@ -919,6 +920,27 @@ TEST(bvh, packed_fibres_hit_and_shade_like_unpacked_ones) {
     EXPECT_EQ(again.shapes[hair].fiber_vertices, fibre.fiber_vertices) << kind;
     for (auto i = 0; i < (int)packed.shapes.size(); i++)
       if (i != hair) EXPECT_TRUE(packed.shapes[i].fiber_vertices.empty()) << kind;
+    // Unpacked, the shape as it was; saved packed, the same PLY bytes.
+    auto plain = fibre;
+    unpack_fiber_vertices(plain);
+    EXPECT_TRUE(plain.fiber_vertices.empty() && plain.fiber_curves.empty()) << kind;
+    EXPECT_EQ(plain.positions, shape.positions) << kind;
+    EXPECT_EQ(plain.radius, shape.radius) << kind;
+    EXPECT_EQ(plain.curves, shape.curves) << kind;
+    EXPECT_EQ(plain.lines, shape.lines) << kind;
+    auto bytes = std::string{}, packed_bytes = std::string{}, save_error = std::string{};
+    ASSERT_TRUE(encode_shape("plain.ply", shape, bytes, save_error)) << save_error;
+    ASSERT_TRUE(encode_shape("packed.ply", fibre, packed_bytes, save_error)) << save_error;
+    EXPECT_TRUE(packed_bytes == bytes) << kind;
+    // Validated packed as unpacked; a strand past the last vertex fails.
+    auto valid_error = std::string{};
+    EXPECT_TRUE(validate_scene(packed, valid_error)) << kind << ": " << valid_error;
+    if (kind == "strands") {
+      auto broken = packed;
+      broken.shapes[hair].fiber_curves.back() = num_vertices(fibre) - 3;
+      EXPECT_FALSE(validate_scene(broken, valid_error));
+      EXPECT_NE(valid_error.find("references vertex"), std::string::npos) << valid_error;
+    }
 
     for (auto pieces : {1, 4}) {
       auto params             = bvh_params{};

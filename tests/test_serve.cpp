@@ -57,7 +57,6 @@ struct test_server {
     settings.scene            = scene;
     settings.samples_given    = true;
     settings.resolution_given = true;
-    settings.pack_fibers      = false;
     auto params       = trace_params{};
     params.samples    = samples;
     params.resolution = 48;
@@ -321,6 +320,21 @@ TEST(serve, a_saved_scene_renders_the_served_image) {
   auto second = server.post("/api/save", R"({"exposure":1})");
   ASSERT_EQ(second->status, 200);
   EXPECT_NE(json::parse(second->body)["scene"], files["scene"]);
+  // A save that cannot write the scene's shapes (a file where their folder
+  // goes) answers 500 and leaves none of its three files.
+  auto before = std::vector<fs::path>{};
+  for (auto& entry : fs::directory_iterator(folder.path / "out")) before.push_back(entry.path());
+  fs::remove_all(folder.path / "out" / "shapes");
+  std::ofstream(folder.path / "out" / "shapes") << "in the way";
+  auto third = server.post("/api/save", "");
+  ASSERT_TRUE(third);
+  EXPECT_EQ(third->status, 500) << third->body;
+  EXPECT_NE(third->body.find("error"), std::string::npos) << third->body;
+  auto after = 0;
+  for (auto& entry : fs::directory_iterator(folder.path / "out"))
+    after += entry.path().filename() != "shapes" &&
+             std::find(before.begin(), before.end(), entry.path()) == before.end();
+  EXPECT_EQ(after, 0);
 }
 
 TEST(serve, many_clients_and_broken_connections_do_not_break_it) {

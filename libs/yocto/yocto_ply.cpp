@@ -538,6 +538,12 @@ bool load_shape(
 
 bool encode_shape(const std::string& filename, const shape_data& shape,
     std::string& data, std::string& error, bool ascii) {
+  // A shape packed for rendering (pack_fiber_vertices) is saved as loaded.
+  if (!shape.fiber_vertices.empty()) {
+    auto plain = shape;
+    unpack_fiber_vertices(plain);
+    return encode_shape(filename, plain, data, error, ascii);
+  }
   auto num_vertices = shape.positions.size();
   auto check_size   = [&](size_t size, const char* what) {
     if (size == 0 || size == num_vertices) return true;

@@ -375,6 +375,25 @@ void pack_fiber_vertices(scene_data& scene) {
   for (auto& shape : scene.shapes) pack_fiber_vertices(shape);
 }
 
+void unpack_fiber_vertices(shape_data& shape) {
+  if (shape.fiber_vertices.empty()) return;
+  shape.positions.resize(shape.fiber_vertices.size());
+  shape.radius.resize(shape.fiber_vertices.size());
+  for (size_t i = 0; i < shape.fiber_vertices.size(); i++) {
+    auto& vertex       = shape.fiber_vertices[i];
+    shape.positions[i] = {vertex.x, vertex.y, vertex.z};
+    shape.radius[i]    = vertex.w;
+  }
+  std::vector<vec4f>{}.swap(shape.fiber_vertices);
+  if (shape.fiber_curves.empty()) return;
+  shape.curves.resize(shape.fiber_curves.size());
+  for (size_t i = 0; i < shape.fiber_curves.size(); i++) {
+    auto first      = shape.fiber_curves[i];
+    shape.curves[i] = {first, first + 1, first + 2, first + 3};
+  }
+  std::vector<int>{}.swap(shape.fiber_curves);
+}
+
 bbox3f compute_bounds(const scene_data& scene) {
   auto shape_bounds = std::vector<bbox3f>{};
   for (auto& shape : scene.shapes) shape_bounds.push_back(compute_bounds(shape));
@@ -504,20 +523,23 @@ static bool check_camera(const camera_data& camera, const std::string& name, std
 }
 
 // Vertex positions and radii: Embree takes them as they are.
+// Packed or not (pack_fiber_vertices).
 static bool check_shape_range(const shape_data& shape, const std::string& name,
     std::string& error) {
-  for (auto i = 0; i < (int)shape.positions.size(); i++) {
-    if (!in_scene_range(shape.positions[i])) {
+  for (auto i = 0; i < num_vertices(shape); i++) {
+    auto position = vertex_position(shape, i);
+    if (!in_scene_range(position)) {
       error = name + ": vertex " + std::to_string(i) + ": position " +
-              format_number(largest_component(shape.positions[i])) + " is " +
-              outside_range();
+              format_number(largest_component(position)) + " is " + outside_range();
       return false;
     }
   }
-  for (auto i = 0; i < (int)shape.radius.size(); i++) {
-    if (!(shape.radius[i] >= 0 && shape.radius[i] <= max_scene_coordinate)) {
+  auto has_radius = !shape.radius.empty() || !shape.fiber_vertices.empty();
+  for (auto i = 0; has_radius && i < num_vertices(shape); i++) {
+    auto radius = vertex_radius(shape, i);
+    if (!(radius >= 0 && radius <= max_scene_coordinate)) {
       error = name + ": vertex " + std::to_string(i) + ": radius " +
-              format_number(shape.radius[i]) + " is negative or outside the range the " +
+              format_number(radius) + " is negative or outside the range the " +
               "ray tracer accepts (<= " + format_number(max_scene_coordinate) + ")";
       return false;
     }
@@ -550,7 +572,7 @@ bool validate_scene(const scene_data& scene, std::string& error) {
       error = name + ": a shape holds only one of triangles, lines or curves";
       return false;
     }
-    auto nverts = (int)shape.positions.size();
+    auto nverts = num_vertices(shape);
     auto check_size = [&](size_t size, const char* what) {
       if (size != 0 && size != (size_t)nverts) {
         error = name + ": " + what + " has " + std::to_string(size) +
@@ -573,6 +595,14 @@ bool validate_scene(const scene_data& scene, std::string& error) {
     if (!check_elements(shape.triangles, nverts, name, "triangle", error)) return false;
     if (!check_elements(shape.lines, nverts, name, "line", error)) return false;
     if (!check_elements(shape.curves, nverts, name, "curve", error)) return false;
+    for (auto c = 0; c < (int)shape.fiber_curves.size(); c++) {
+      auto first = shape.fiber_curves[c];
+      if (first < 0 || first > nverts - 4) {
+        error = name + ": curve " + std::to_string(c) + " references vertex " +
+                std::to_string(first < 0 ? first : first + 3) + " of " + std::to_string(nverts);
+        return false;
+      }
+    }
     if (!check_shape_range(shape, name, error)) return false;
   }
   for (auto i = 0; i < (int)scene.materials.size(); i++) {
@@ -640,7 +670,7 @@ bool validate_scene(const scene_data& scene, std::string& error) {
               " (hair needs lines or curves)";
       return false;
     }
-    if (is_fiber(shape) && shape.radius.empty()) {
+    if (is_fiber(shape) && shape.radius.empty() && shape.fiber_vertices.empty()) {
       error = name + ": fiber " + element_name(scene.shape_names, instance.shape, "shape") +
               " has no radius";
       return false;

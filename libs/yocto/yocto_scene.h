@@ -331,10 +331,12 @@ inline bool is_fiber(const shape_data& shape) {
 // radius for every vertex, and triangles, stay as they are. What a render
 // reads reads packed and unpacked shapes alike, through the functions
 // below: hit geometry, strands, bounds, the fingerprint (the same either
-// way) and the BVH. Validation, curves_to_lines, IO and the generators
-// take unpacked shapes.
+// way), the BVH, validation and saving (which unpacks a copy of each
+// shape); curves_to_lines, loading and the generators take unpacked ones.
 void pack_fiber_vertices(shape_data& shape);
 void pack_fiber_vertices(scene_data& scene);
+// The inverse: positions, radius and curves back from the packed layout.
+void unpack_fiber_vertices(shape_data& shape);
 
 // A vertex's position and radius (0 without radii), and the vertex count,
 // packed or not.
@@ -481,8 +483,9 @@ inline constexpr float max_scene_coordinate = 1e15f;
 // centre and rim of the lens) must start within max_scene_coordinate along a
 // finite unit direction; vertex positions, radii and instanced bounds must lie
 // within it; distant light directions must normalize; hair materials'
-// parameters must lie in their ranges (check_hair_material). Returns false
-// with a message naming the element.
+// parameters must lie in their ranges (check_hair_material). Shapes may be
+// packed (pack_fiber_vertices). Returns false with a message naming the
+// element.
 bool validate_scene(const scene_data& scene, std::string& error);
 
 // validate_scene for a scene a loader has just converted from `filename`: on

@@ -201,10 +201,19 @@ static bool save_served_render(
       exists = exists || std::filesystem::exists(base + extension);
     if (!exists) break;
   }
+  // The three files or none: a failure removes what this save wrote.
+  auto written = std::vector<std::string>{};
+  auto failed  = [&] {
+    auto ignored = std::error_code{};
+    for (auto& filename : written) std::filesystem::remove(filename, ignored);
+    return false;
+  };
   auto image  = get_image(session.state);
   auto layers = get_aov_layers(session.state);
-  if (!save_image_layers(base + ".exr", image, layers, error, false)) return false;
-  if (!save_image(base + ".png", image, error, exposure, false)) return false;
+  if (!save_image_layers(base + ".exr", image, layers, error, false)) return failed();
+  written.push_back(base + ".exr");
+  if (!save_image(base + ".png", image, error, exposure, false)) return failed();
+  written.push_back(base + ".png");
   auto& scene    = session.scene;
   auto  camera   = session.params.camera;
   auto  settings = scene.settings;
@@ -215,7 +224,7 @@ static bool save_served_render(
   scene.settings = settings;
   std::swap(scene.cameras[0], scene.cameras[camera]);
   if (!scene.camera_names.empty()) std::swap(scene.camera_names[0], scene.camera_names[camera]);
-  if (!ok) return false;
+  if (!ok) return failed();
   result = {{"image", base + ".exr"}, {"png", base + ".png"}, {"scene", base + ".json"},
       {"samples", session.state.samples}};
   return true;
