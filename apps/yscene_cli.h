@@ -175,6 +175,10 @@ struct convert_options {
   std::string        curves = "native";  // native or lines
   yocto::pbrt_params params = {};
   bool               quiet  = false;
+  // USD input (scripts/usd_to_yocto.py): the time code read ("" for the
+  // default time) and a json scene whose hair material grooms take.
+  std::string usd_time      = "";
+  std::string hair_material = "";
 };
 
 CLI::App* add_convert_command(CLI::App& app, convert_options& options, std::string& max_memory);

@@ -6,15 +6,19 @@
 # and libFuzzer, which scripts/fuzz.sh needs. With --denoise, also Debian's
 # OpenImageIO and NumPy for Python and a venv, .venv/denoise, that sees them
 # and holds pyoidn (Intel Open Image Denoise from PyPI) for scripts/denoise.py.
+# With --usd, a venv .venv/usd that sees Debian's NumPy and holds Pixar's
+# usd-core from PyPI, for yscene convert of USD files (scripts/usd_to_yocto.py).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 fuzz=0
 denoise=0
+usd=0
 for option in "$@"; do
   case $option in
     --fuzz) fuzz=1 ;;
     --denoise) denoise=1 ;;
-    *) echo "usage: bash scripts/setup.sh [--fuzz] [--denoise]" >&2; exit 2 ;;
+    --usd) usd=1 ;;
+    *) echo "usage: bash scripts/setup.sh [--fuzz] [--denoise] [--usd]" >&2; exit 2 ;;
   esac
 done
 
@@ -27,6 +31,9 @@ if [ $fuzz -eq 1 ]; then
 fi
 if [ $denoise -eq 1 ]; then
   packages="$packages python3-venv python3-numpy python3-openimageio"
+fi
+if [ $usd -eq 1 ]; then
+  packages="$packages python3-venv python3-numpy"
 fi
 missing=""
 for package in $packages; do
@@ -59,6 +66,18 @@ if [ $denoise -eq 1 ]; then
     echo "installing: pyoidn $pyoidn into $venv"
     /usr/bin/python3 -m venv --system-site-packages "$venv"
     "$venv/bin/python" -m pip install --quiet --disable-pip-version-check "pyoidn==$pyoidn"
+  fi
+fi
+
+# Pixar's usd-core, pinned, in its own venv (Debian has no USD package).
+if [ $usd -eq 1 ]; then
+  venv=.venv/usd
+  usd_core=26.11
+  check="import importlib.metadata as m, sys, numpy, pxr.Usd; sys.exit(m.version('usd-core') != '$usd_core')"
+  if ! "$venv/bin/python" -c "$check" 2>/dev/null; then
+    echo "installing: usd-core $usd_core into $venv"
+    /usr/bin/python3 -m venv --system-site-packages "$venv"
+    "$venv/bin/python" -m pip install --quiet --disable-pip-version-check "usd-core==$usd_core"
   fi
 fi
 

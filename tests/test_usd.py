@@ -1,0 +1,444 @@
+#!/usr/bin/python3
+"""Tests USD import: yscene convert GROOM.usda OUT.json through
+scripts/usd_to_yocto.py and Pixar's usd-core. Hand-written stages (made here
+from text) for each basis, wrap and width interpolation, a transformed, an
+instanced and a point-instanced groom: the converted Bezier control points
+and radii equal the ones computed here, segment by segment, from the
+schema's definitions (within 1e-5), and the segment counts equal usd-core's
+ComputeSegmentCounts. Malformed stages fail with one line naming the prim,
+a non-zero exit and no output. A converted groom renders to a finite image.
+
+Usage: python3 tests/test_usd.py YSCENE_PATH [unittest options]
+
+Runs itself under .venv/usd/bin/python (bash scripts/setup.sh --usd, which
+scripts/test.sh runs); without it, prints why it is skipped and exits 77.
+"""
+
+import json
+import math
+import os
+import struct
+import subprocess
+import sys
+import tempfile
+import unittest
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+VENV = os.path.join(ROOT, ".venv", "usd")
+VENV_PYTHON = os.path.join(VENV, "bin", "python")
+YSCENE = None  # set from the command line
+TOLERANCE = 1e-5
+
+
+def read_ply(filename):
+    """Vertex columns by name and the list element (name, rows) of a binary
+    little-endian PLY as yscene writes it."""
+    with open(filename, "rb") as file:
+        data = file.read()
+    end = data.index(b"end_header\n") + len(b"end_header\n")
+    header = data[:end].decode("ascii").split("\n")
+    assert header[1] == "format binary_little_endian 1.0", header[1]
+    elements, current = [], None
+    for line in header:
+        words = line.split()
+        if words and words[0] == "element":
+            current = [words[1], int(words[2]), []]
+            elements.append(current)
+        elif words and words[0] == "property":
+            current[2].append(words[1:])
+    offset, vertices, lists = end, {}, None
+    for name, count, properties in elements:
+        if name == "vertex":
+            assert all(p[0] == "float" for p in properties), properties
+            size = len(properties)
+            values = struct.unpack_from(f"<{count * size}f", data, offset)
+            offset += 4 * count * size
+            for k, p in enumerate(properties):
+                vertices[p[1]] = values[k::size]
+        else:
+            rows = []
+            for _ in range(count):
+                n = data[offset]
+                rows.append(struct.unpack_from(f"<{n}i", data, offset + 1))
+                offset += 1 + 4 * n
+            lists = (name, rows)
+    return vertices, lists
+
+
+def read_pfm(filename):
+    with open(filename, "rb") as file:
+        kind = file.readline().strip()
+        width, height = map(int, file.readline().split())
+        scale = float(file.readline())
+        channels = 3 if kind == b"PF" else 1
+        fmt = "<" if scale < 0 else ">"
+        values = struct.unpack(f"{fmt}{width * height * channels}f", file.read())
+    return width, height, values
+
+
+def vec(a, b, s=1.0):
+    return [a[i] + s * b[i] for i in range(3)]
+
+
+def combo(weights, points):
+    return [sum(w * p[i] for w, p in zip(weights, points)) for i in range(3)]
+
+
+def bezier_of(basis, p0, p1, p2, p3):
+    """The Bezier control points of one segment, from the standard basis
+    functions (bspline: uniform cubic B-spline; catmullRom: tension 1/2)."""
+    if basis == "bezier":
+        return [p0, p1, p2, p3]
+    if basis == "bspline":
+        return [combo([1 / 6, 4 / 6, 1 / 6], [p0, p1, p2]), combo([4 / 6, 2 / 6], [p1, p2]),
+                combo([2 / 6, 4 / 6], [p1, p2]), combo([1 / 6, 4 / 6, 1 / 6], [p1, p2, p3])]
+    # catmullRom: tangent at p1 is (p2 - p0) / 2, a third of it to the handle.
+    return [p1, vec(p1, vec(p2, p0, -1), 1 / 6), vec(p2, vec(p3, p1, -1), -1 / 6), p2]
+
+
+def schema_segments(basis, wrap, points):
+    """The four control points of each segment of one curve, per the
+    UsdGeomBasisCurves schema (pinned: the phantom points 2 P0 - P1 and
+    2 Pn-1 - Pn-2)."""
+    n = len(points)
+    if wrap == "pinned" and basis != "bezier":
+        first = [2 * points[0][i] - points[1][i] for i in range(3)]
+        last = [2 * points[-1][i] - points[-2][i] for i in range(3)]
+        points, n = [first] + points + [last], n + 2
+    step = 3 if basis == "bezier" else 1
+    if wrap == "periodic":
+        return [[points[(k * step + j) % n] for j in range(4)] for k in range(n // step)]
+    return [[points[k * step + j] for j in range(4)] for k in range((n - 4) // step + 1)]
+
+
+def format_points(points):
+    return ", ".join(f"({p[0]!r}, {p[1]!r}, {p[2]!r})" for p in points)
+
+
+def curves_stage(counts, points, kind="cubic", basis="bezier", wrap="nonperiodic",
+                 widths=None, interpolation="vertex", extra="", xform=""):
+    prim = curves_prim("hair", counts, points, kind, basis, wrap, widths, interpolation, extra)
+    return "\n".join(["#usda 1.0", 'def Xform "groom"', "{", xform, prim, "}"]) + "\n"
+
+
+def curves_prim(name, counts, points, kind="cubic", basis="bezier", wrap="nonperiodic",
+                widths=None, interpolation="vertex", extra=""):
+    lines = [f'    def BasisCurves "{name}"', "    {",
+             f'        uniform token type = "{kind}"', f'        uniform token basis = "{basis}"',
+             f'        uniform token wrap = "{wrap}"',
+             f"        int[] curveVertexCounts = {list(counts)}",
+             f"        point3f[] points = [{format_points(points)}]"]
+    if widths is not None:
+        lines.append(f"        float[] widths = {list(widths)} (interpolation = \"{interpolation}\")")
+    lines += [extra, "    }"]
+    return "\n".join(lines)
+
+
+def test_points(counts, seed=1):
+    """Deterministic, irregular points (a little LCG: no random module)."""
+    state, out = seed, []
+    for _ in range(sum(counts)):
+        p = []
+        for _ in range(3):
+            state = (state * 1103515245 + 12345) % 2 ** 31
+            p.append(round(state / 2 ** 31 * 4 - 2, 4))
+        out.append(p)
+    return out
+
+
+class UsdTest(unittest.TestCase):
+    def setUp(self):
+        self.folder = tempfile.TemporaryDirectory()
+        self.dir = self.folder.name
+
+    def tearDown(self):
+        self.folder.cleanup()
+
+    def write(self, name, text):
+        path = os.path.join(self.dir, name)
+        with open(path, "w") as file:
+            file.write(text)
+        return path
+
+    def convert(self, text, name="groom.usda", *options):
+        source = self.write(name, text) if text is not None else os.path.join(self.dir, name)
+        output = os.path.join(self.dir, "out", "scene.json")
+        result = subprocess.run([YSCENE, "convert", source, output, *options],
+                                capture_output=True, text=True, timeout=60)
+        return source, output, result
+
+    def converted(self, text, *options):
+        source, output, result = self.convert(text, "groom.usda", *options)
+        self.assertEqual(result.returncode, 0, result.stderr)
+        with open(output) as file:
+            scene = json.load(file)
+        shapes = [read_ply(os.path.join(os.path.dirname(output), s["uri"]))
+                  for s in scene["shapes"]]
+        return source, scene, shapes
+
+    def usd_segment_count(self, source, path="/groom/hair"):
+        from pxr import Usd, UsdGeom
+        stage = Usd.Stage.Open(source)
+        curves = UsdGeom.BasisCurves(stage.GetPrimAtPath(path))
+        return int(sum(curves.ComputeSegmentCounts(Usd.TimeCode.Default())))
+
+    def assert_close(self, actual, expected, what):
+        self.assertEqual(len(actual), len(expected), what)
+        for k, (a, e) in enumerate(zip(actual, expected)):
+            for i in range(len(e)):
+                self.assertLess(abs(a[i] - e[i]), TOLERANCE,
+                                f"{what}: point {k}: {a} != {e}")
+
+    def check_cubic(self, source, shape, name, basis, wrap, counts):
+        points = test_points(counts)
+        widths = [0.01 + 0.001 * k for k in range(len(points))]
+        vertices, (element, rows) = shape
+        self.assertEqual(element, "curve")
+        self.assertEqual(len(rows), self.usd_segment_count(source, "/groom/" + name))
+        expected, expected_radii, offset = [], [], 0
+        for n in counts:
+            curve = points[offset:offset + n]
+            radii = [[w / 2, 0, 0] for w in widths[offset:offset + n]]
+            for segment, radius in zip(schema_segments(basis, wrap, curve),
+                                       schema_segments(basis, wrap, radii)):
+                expected += bezier_of(basis, *segment)
+                expected_radii += [r[0] for r in bezier_of(basis, *radius)]
+            offset += n
+        xyz = list(zip(vertices["x"], vertices["y"], vertices["z"]))
+        actual = [xyz[i] for row in rows for i in row]
+        self.assert_close(actual, expected, f"{basis} {wrap}")
+        actual_radii = [(vertices["radius"][i],) for row in rows for i in row]
+        self.assert_close(actual_radii, [(r,) for r in expected_radii], f"{basis} {wrap} radii")
+
+    def test_bases_and_wraps(self):
+        cases = (("bezier", "nonperiodic", [4, 7, 10]),
+                                    ("bezier", "pinned", [7, 4]),
+                                    ("bezier", "periodic", [6, 9]),
+                                    ("bspline", "nonperiodic", [4, 5, 9]),
+                                    ("bspline", "pinned", [2, 3, 6]),
+                                    ("bspline", "periodic", [3, 5]),
+                                    ("catmullRom", "nonperiodic", [4, 6]),
+                                    ("catmullRom", "pinned", [2, 5, 8]),
+                                    ("catmullRom", "periodic", [4, 7]))
+        prims = []
+        for k, (basis, wrap, counts) in enumerate(cases):
+            points = test_points(counts)
+            widths = [0.01 + 0.001 * k for k in range(len(points))]
+            prims.append(curves_prim(f"c{k}", counts, points, "cubic", basis, wrap, widths))
+        text = "\n".join(["#usda 1.0", 'def Xform "groom"', "{", *prims, "}", ""])
+        source, scene, shapes = self.converted(text)
+        self.assertEqual(len(shapes), len(cases))
+        for k, ((basis, wrap, counts), shape) in enumerate(zip(cases, shapes)):
+            with self.subTest(basis=basis, wrap=wrap):
+                self.check_cubic(source, shape, f"c{k}", basis, wrap, counts)
+
+    def test_linear_curves_are_lines(self):
+        for wrap in ("nonperiodic", "periodic"):
+            with self.subTest(wrap=wrap):
+                counts = [2, 5, 3] if wrap == "nonperiodic" else [3, 5, 4]
+                points = test_points(counts, seed=7)
+                widths = [0.02 * (k + 1) for k in range(len(points))]
+                text = curves_stage(counts, points, "linear", "bezier", wrap, widths, "varying")
+                source, scene, shapes = self.converted(text)
+                (vertices, (element, rows)), = shapes
+                self.assertEqual(element, "line")
+                self.assertEqual(len(rows), self.usd_segment_count(source))
+                xyz = list(zip(vertices["x"], vertices["y"], vertices["z"]))
+                expected, radii, offset = [], [], 0
+                for n in counts:
+                    ends = [(k, (k + 1) % n) for k in range(n if wrap == "periodic" else n - 1)]
+                    for a, b in ends:
+                        expected += [points[offset + a], points[offset + b]]
+                        radii += [(widths[offset + a] / 2,), (widths[offset + b] / 2,)]
+                    offset += n
+                self.assert_close([xyz[i] for row in rows for i in row], expected, wrap)
+                self.assert_close([(vertices["radius"][i],) for row in rows for i in row],
+                                  radii, wrap + " radii")
+
+    def test_width_interpolations(self):
+        counts = [5, 4]  # bspline nonperiodic: 2 and 1 segments
+        points = test_points(counts, seed=3)
+        segments = [2, 1]
+        cases = {"constant": [0.04], "uniform": [0.02, 0.06],
+                 "varying": [0.01, 0.02, 0.05, 0.03, 0.07]}
+        prims = [curves_prim(name, counts, points, "cubic", "bspline", "nonperiodic", widths,
+                             name) for name, widths in cases.items()]
+        text = "\n".join(["#usda 1.0", 'def Xform "groom"', "{", *prims, "}", ""])
+        _, _, shapes = self.converted(text)
+        for (interpolation, widths), shape in zip(cases.items(), shapes):
+            with self.subTest(interpolation=interpolation):
+                vertices, (_, rows) = shape
+                expected, varying = [], 0
+                for curve, s in enumerate(segments):
+                    for k in range(s):
+                        if interpolation == "constant":
+                            ends = (widths[0], widths[0])
+                        elif interpolation == "uniform":
+                            ends = (widths[curve], widths[curve])
+                        else:  # linear from the segment's start to its end
+                            ends = (widths[varying + k], widths[varying + k + 1])
+                        expected += [((ends[0] * (3 - j) + ends[1] * j) / 3 / 2,) for j in range(4)]
+                    varying += s + 1
+                actual = [(vertices["radius"][i],) for row in rows for i in row]
+                self.assert_close(actual, expected, interpolation)
+
+    def test_no_widths_takes_the_default(self):
+        points = test_points([4])
+        text = curves_stage([4], points, "cubic", "bezier", "nonperiodic")
+        source, output, result = self.convert(text)
+        self.assertEqual(result.returncode, 0, result.stderr)
+        self.assertIn("curves without widths (width 0.01 used): 1 (first: /groom/hair)",
+                      result.stderr)
+        vertices, _ = read_ply(os.path.join(os.path.dirname(output), "shapes",
+                                            os.listdir(os.path.join(self.dir, "out",
+                                                                    "shapes"))[0]))
+        self.assertTrue(all(abs(r - 0.005) < 1e-9 for r in vertices["radius"]))
+
+    def test_transformed_groom(self):
+        # Scale 2, then rotate 90 degrees about z, then translate (1, 2, 3):
+        # (x, y, z) -> (-2 y + 1, 2 x + 2, 2 z + 3); radii double.
+        xform = ('    double3 xformOp:translate = (1, 2, 3)\n'
+                 '    float3 xformOp:rotateXYZ = (0, 0, 90)\n'
+                 '    float3 xformOp:scale = (2, 2, 2)\n'
+                 '    uniform token[] xformOpOrder = ["xformOp:translate", '
+                 '"xformOp:rotateXYZ", "xformOp:scale"]')
+        points = test_points([4], seed=5)
+        text = curves_stage([4], points, "cubic", "bezier", "nonperiodic", [0.1], "constant",
+                            xform=xform)
+        _, _, shapes = self.converted(text)
+        (vertices, (_, rows)), = shapes
+        expected = [(-2 * p[1] + 1, 2 * p[0] + 2, 2 * p[2] + 3) for p in points]
+        xyz = list(zip(vertices["x"], vertices["y"], vertices["z"]))
+        self.assert_close([xyz[i] for i in rows[0]], expected, "transformed")
+        self.assert_close([(vertices["radius"][i],) for i in rows[0]], [(0.1,)] * 4, "radii")
+
+    def test_instanced_groom(self):
+        points = test_points([4], seed=9)
+        text = "\n".join([
+            "#usda 1.0",
+            'def Xform "proto" {', 'def BasisCurves "hair" {',
+            '    uniform token type = "cubic"', '    uniform token basis = "bezier"',
+            "    int[] curveVertexCounts = [4]",
+            f"    point3f[] points = [{format_points(points)}]",
+            "    float[] widths = [0.02] (interpolation = \"constant\")", "}", "}",
+            'def Xform "a" (', "instanceable = true", "references = </proto>", ") {",
+            "    double3 xformOp:translate = (10, 0, 0)",
+            '    uniform token[] xformOpOrder = ["xformOp:translate"]', "}",
+            'def Xform "b" (', "instanceable = true", "references = </proto>", ") {",
+            "    double3 xformOp:translate = (0, 0, -5)",
+            '    uniform token[] xformOpOrder = ["xformOp:translate"]', "}",
+            'def PointInstancer "scatter" {',
+            "    int[] protoIndices = [0, 0]", "    point3f[] positions = [(0, 7, 0), (0, 9, 0)]",
+            "    rel prototypes = [</scatter/protos/lock>]",
+            '    def Scope "protos" {', 'def Xform "lock" (', "references = </proto>", ") {", "}",
+            "}", "}",
+            ""])
+        _, scene, shapes = self.converted(text)
+        offsets = {"proto_hair": (0, 0, 0), "a_hair": (10, 0, 0), "b_hair": (0, 0, -5)}
+        names = [s["name"] for s in scene["shapes"]]
+        self.assertEqual(len(shapes), 5, names)
+        for name, (vertices, (_, rows)) in zip(names, shapes):
+            if name in offsets:
+                d = offsets[name]
+            else:  # the point instancer's two instances, in order
+                d = (0, 7 if "[0]" in name or name.endswith("_0") else 9, 0)
+            xyz = list(zip(vertices["x"], vertices["y"], vertices["z"]))
+            self.assert_close([xyz[i] for i in rows[0]], [vec(p, d) for p in points], name)
+        instanced = sorted(n for n in names if n not in offsets)
+        self.assertEqual(len(instanced), 2, names)
+
+    def test_hair_primvars_and_display_color(self):
+        points = test_points([4, 4])
+        extra = ("        float primvars:eumelanin = 0.8 (interpolation = \"constant\")\n"
+                 "        float primvars:roughness = 0.45 (interpolation = \"constant\")")
+        _, scene, _ = self.converted(curves_stage([4, 4], points, widths=[0.01], interpolation="constant",
+                                                  extra=extra))
+        material = scene["materials"][0]
+        self.assertEqual(material["type"], "hair")
+        self.assertAlmostEqual(material["eumelanin"], 0.8, places=6)
+        self.assertAlmostEqual(material["beta_m"], 0.45, places=6)
+        extra = "        color3f[] primvars:displayColor = [(0.6, 0.4, 0.2)]"
+        _, scene, _ = self.converted(curves_stage([4, 4], points, widths=[0.01], interpolation="constant",
+                                                  extra=extra))
+        self.assertEqual([round(c, 6) for c in scene["materials"][0]["color"]], [0.6, 0.4, 0.2])
+        # --hair-material wins over displayColor.
+        material_file = self.write("look.json", json.dumps(
+            {"materials": [{"name": "look", "type": "hair", "eumelanin": 4.0}]}))
+        _, scene, _ = self.converted(curves_stage([4, 4], points, widths=[0.01], interpolation="constant",
+                                                  extra=extra), "--hair-material", material_file)
+        self.assertEqual(scene["materials"][0]["eumelanin"], 4.0)
+        self.assertNotIn("color", scene["materials"][0])
+
+    def assert_fails(self, text, *needles, name="groom.usda"):
+        source, output, result = self.convert(text, name)
+        self.assertNotEqual(result.returncode, 0, result.stdout)
+        lines = [l for l in result.stderr.splitlines() if l.startswith("error:")]
+        self.assertEqual(len(lines), 1, result.stderr)
+        for needle in needles:
+            self.assertIn(needle, lines[0])
+        self.assertIn("Traceback" if False else "error:", lines[0])
+        self.assertNotIn("Traceback", result.stderr)
+        self.assertFalse(os.path.exists(output), "an output was left")
+        self.assertFalse(os.path.exists(os.path.dirname(output)), "the output folder was left")
+
+    def test_malformed_stages(self):
+        points = test_points([4, 4])
+        self.assert_fails(curves_stage([4, 5], points), "/groom/hair", "add up to 9",
+                          "points has 8")
+        self.assert_fails(curves_stage([4, 4], points).replace(
+            "point3f[] points", "point3f[] unused"), "/groom/hair", "no points")
+        nan = [list(p) for p in points]
+        nan[5][1] = float("nan")
+        self.assert_fails(curves_stage([4, 4], nan).replace("nan", "nan"), "/groom/hair",
+                          "points[5]")
+        self.assert_fails(curves_stage([4, 4], points, widths=[0.1, -0.2], interpolation="uniform"),
+                          "/groom/hair", "widths[1] is negative")
+        self.assert_fails(curves_stage([4, 4], points, widths=[0.1, 0.2, 0.3],
+                                       interpolation="uniform"), "/groom/hair", "widths has 3")
+        self.assert_fails(curves_stage([5, 3], points, basis="bezier"), "/groom/hair",
+                          "curveVertexCounts[")
+        self.assert_fails("#usda 1.0\n", "no curves or meshes")
+        self.assert_fails("this is not a USD file\n", "groom.usda", "not a readable USD stage")
+        self.assert_fails("garbage", "groom.usdc", "not a readable USD stage", name="groom.usdc")
+        self.assert_fails(curves_stage([4, 4], points), "groom.txt", name="groom.txt")
+
+    def test_render_of_a_converted_groom(self):
+        points = [[x * 0.1, 0.0, z] for x in range(-3, 4) for z in (0.0, 0.3, 0.6, 1.0)]
+        counts = [4] * 7
+        camera = ('def Camera "camera" {\n  double3 xformOp:translate = (0, -0.2, 4)\n'
+                  '  uniform token[] xformOpOrder = ["xformOp:translate"]\n}\n'
+                  'def DomeLight "sky" {\n float inputs:intensity = 1\n}\n')
+        text = curves_stage(counts, points, "cubic", "catmullRom", "pinned", [0.05],
+                            "constant") + camera
+        source, output, result = self.convert(text)
+        self.assertEqual(result.returncode, 0, result.stderr)
+        image = os.path.join(self.dir, "image.pfm")
+        result = subprocess.run([YSCENE, "render", output, "--resolution", "32", "--samples",
+                                 "2", "--output", image, "--quiet"],
+                                capture_output=True, text=True, timeout=60)
+        self.assertEqual(result.returncode, 0, result.stderr)
+        width, height, values = read_pfm(image)
+        self.assertEqual(max(width, height), 32)
+        self.assertTrue(all(v == v and abs(v) < 1e30 for v in values))
+        self.assertGreater(max(values), 0)
+
+
+def main():
+    global YSCENE
+    if len(sys.argv) < 2:
+        print("usage: python3 tests/test_usd.py YSCENE_PATH [unittest options]", file=sys.stderr)
+        return 2
+    if os.path.realpath(sys.prefix) != os.path.realpath(VENV):
+        probe = "import numpy, pxr.Usd"
+        if not os.path.isfile(VENV_PYTHON) or subprocess.run(
+                [VENV_PYTHON, "-c", probe], capture_output=True).returncode != 0:
+            print("skipped: usd-core not installed (bash scripts/setup.sh --usd)")
+            return 77
+        os.execv(VENV_PYTHON, [VENV_PYTHON, os.path.abspath(__file__), *sys.argv[1:]])
+    YSCENE = os.path.abspath(sys.argv[1])
+    program = unittest.main(argv=[sys.argv[0], *sys.argv[2:]], exit=False, verbosity=2)
+    return 0 if program.result.wasSuccessful() else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
