@@ -402,6 +402,56 @@ class UsdTest(unittest.TestCase):
         self.assert_fails("garbage", "groom.usdc", "not a readable USD stage", name="groom.usdc")
         self.assert_fails(curves_stage([4, 4], points), "groom.txt", name="groom.txt")
 
+    def test_blender_groom(self):
+        """Blender 5.0's own export (scripts/usd/make_blender_groom.py): every
+        segment usd-core counts is one of ours, and every control point is
+        the one the schema makes of the points Blender reports (1e-5)."""
+        data = os.path.join(ROOT, "tests", "data", "usd")
+        with open(os.path.join(data, "blender-groom.json")) as file:
+            blender = json.load(file)
+        source = os.path.join(data, "blender-groom.usda")
+        output = os.path.join(self.dir, "out", "scene.json")
+        result = subprocess.run([YSCENE, "convert", source, output], capture_output=True,
+                                text=True, timeout=60)
+        self.assertEqual(result.returncode, 0, result.stderr)
+        with open(output) as file:
+            scene = json.load(file)
+        shapes = {s["name"]: read_ply(os.path.join(self.dir, "out", s["uri"]))
+                  for s in scene["shapes"]}
+        # Particle hair: linear curves, no widths (the default, 0.01).
+        vertices, (element, rows) = shapes["root_scalp_fur"]
+        self.assertEqual(element, "line")
+        self.assertEqual(len(rows), self.usd_segment_count(source, "/root/scalp/fur"))
+        xyz = list(zip(vertices["x"], vertices["y"], vertices["z"]))
+        expected = [p for strand in blender["particle_hair"]
+                    for a, b in zip(strand[:-1], strand[1:]) for p in (a, b)]
+        self.assert_close([xyz[i] for row in rows for i in row], expected, "particle hair")
+        self.assertTrue(all(abs(r - 0.005) < 1e-9 for r in vertices["radius"]))
+        # Hair curves: cubic Catmull-Rom, pinned, widths per vertex.
+        vertices, (element, rows) = shapes["root_lock_lock"]
+        self.assertEqual(element, "curve")
+        self.assertEqual(len(rows), self.usd_segment_count(source, "/root/lock/lock"))
+        xyz = list(zip(vertices["x"], vertices["y"], vertices["z"]))
+        expected, radii = [], []
+        for strand, strand_radii in zip(blender["hair_curves"], blender["hair_curves_radius"]):
+            for segment in schema_segments("catmullRom", "pinned", strand):
+                expected += bezier_of("catmullRom", *segment)
+            for segment in schema_segments("catmullRom", "pinned",
+                                           [[r, 0, 0] for r in strand_radii]):
+                radii += [(r[0],) for r in bezier_of("catmullRom", *segment)]
+        self.assert_close([xyz[i] for row in rows for i in row], expected, "hair curves")
+        self.assert_close([(vertices["radius"][i],) for row in rows for i in row], radii,
+                          "hair curves radii")
+        # The camera and the sun come across.
+        camera, = scene["cameras"]
+        self.assert_close([camera["frame"][9:12]], [blender["camera"]["location"]], "camera")
+        fov = 2 * math.atan(camera["film"] / 2 / camera["lens"])
+        expected_fov = 2 * math.atan(blender["camera"]["sensor_width_mm"] / 2 /
+                                     blender["camera"]["lens_mm"])
+        self.assertAlmostEqual(fov, expected_fov, places=5)
+        light, = scene["distant_lights"]
+        self.assert_close([light["direction"]], [blender["sun"]["direction"]], "sun")
+
     def test_render_of_a_converted_groom(self):
         points = [[x * 0.1, 0.0, z] for x in range(-3, 4) for z in (0.0, 0.3, 0.6, 1.0)]
         counts = [4] * 7
