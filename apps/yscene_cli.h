@@ -176,9 +176,11 @@ struct convert_options {
   yocto::pbrt_params params = {};
   bool               quiet  = false;
   // USD input (scripts/usd_to_yocto.py): the time code read ("" for the
-  // default time) and a json scene whose hair material grooms take.
+  // default time), a json scene whose hair material grooms take and the
+  // width of curves that author none ("" for the converter's 0.01).
   std::string usd_time      = "";
   std::string hair_material = "";
+  std::string usd_width     = "";
 };
 
 CLI::App* add_convert_command(CLI::App& app, convert_options& options, std::string& max_memory);

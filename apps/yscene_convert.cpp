@@ -64,6 +64,7 @@ static bool run_usd_converter(const std::string& input, const std::string& folde
   if (!options.usd_time.empty()) args.insert(args.end(), {"--time", options.usd_time});
   if (!options.hair_material.empty())
     args.insert(args.end(), {"--hair-material", options.hair_material});
+  if (!options.usd_width.empty()) args.insert(args.end(), {"--width", options.usd_width});
   if (options.quiet) args.push_back("--quiet");
   auto argv = std::vector<char*>{};
   for (auto& arg : args) argv.push_back(arg.data());
@@ -135,8 +136,9 @@ static int convert_scene(const std::string& input, const std::string& output,
     auto child_failed = false;
     if (!load_usd_scene(input, scene, options, error, child_failed))
       return child_failed ? 1 : print_error(error);
-  } else if (!options.usd_time.empty() || !options.hair_material.empty()) {
-    return print_error(input + ": --time and --hair-material are for USD inputs");
+  } else if (!options.usd_time.empty() || !options.hair_material.empty() ||
+             !options.usd_width.empty()) {
+    return print_error(input + ": --time, --hair-material and --width are for USD inputs");
   } else if (!load_any_scene(input, scene, error, with_memory_limit(params))) {
     return print_error(error);
   }
@@ -179,6 +181,10 @@ CLI::App* add_convert_command(CLI::App& app, convert_options& options, std::stri
   convert->add_option("--hair-material", options.hair_material,
       "USD: a json scene whose first hair material grooms without hair primvars take "
       "(default: eumelanin 1.3)");
+  convert->add_option("--width", options.usd_width,
+      "USD: the width (diameter) of curves that author no widths, such as Blender's particle "
+      "hair (default: 0.01)")
+      ->check(CLI::PositiveNumber);
   convert->add_flag("--quiet,-q", options.quiet, "print nothing on success");
   add_max_memory_option(convert, max_memory);
   return convert;

@@ -14,7 +14,9 @@ What is read (the UsdGeomBasisCurves schema's semantics):
   P[-1] = 2 P[0] - P[1], P[n] = 2 P[n-1] - P[n-2], as the schema defines them)
   or periodic. widths are diameters (radius = width / 2) with constant,
   uniform, varying (linear along each segment) or vertex (the curve's basis)
-  interpolation; DEFAULT_WIDTH where none is authored.
+  interpolation; where none is authored, --width (default DEFAULT_WIDTH):
+  Blender writes none for particle hair, which Cycles renders at the particle
+  settings' radius_scale x root_radius (tapering to tip_radius).
 - points at the default time or --time; composed world transforms baked into
   the points (radii scaled by the cube root of the transform's determinant);
   instance proxies and PointInstancers of curves and meshes.
@@ -25,8 +27,11 @@ What is read (the UsdGeomBasisCurves schema's semantics):
   a colour per point), else the default: eumelanin 1.3, beta_m = beta_n = 0.3.
 - Mesh (triangulated, smooth normals unless vertex normals are authored; matte
   in its constant displayColor or grey 0.5), Camera (perspective), DistantLight
-  (-> distant light), DomeLight (-> environment: colour * intensity * 2^exposure,
-  with its lat-long texture if any).
+  (-> distant light of irradiance colour * intensity * 2^exposure), DomeLight
+  (-> environment: the same emission, with its lat-long texture if any). A
+  stage Blender wrote (its root layer's doc "Blender v...") has its sun's
+  intensity read times BLENDER_SUN_SCALE: Blender's exporter writes a sun of
+  strength S W/m^2 as intensity S / 4, which its importer reads back as S.
 Anything else is named in one warning line per kind (what, count, first prim).
 Errors are one line "error: FILE: PRIM: message", exit status 1.
 """
@@ -43,6 +48,7 @@ import numpy as np
 DEFAULT_WIDTH = 0.01  # scene units, where a curves prim authors no widths
 DEFAULT_HAIR = {"type": "hair", "eumelanin": 1.3, "pheomelanin": 0.0, "beta_m": 0.3,
                 "beta_n": 0.3, "alpha": 2.0, "eta": 1.55}
+BLENDER_SUN_SCALE = 4.0  # Blender exports sun strength / 4 (its usd_writer_light)
 CHUNK_CURVES = 65536  # curves converted at a time (bounds the working memory)
 
 # Change of basis to Bezier: rows are the Bezier control points of one
@@ -61,8 +67,10 @@ class ConvertError(Exception):
 class Context:
     """What the conversion gathers: warnings by kind, and the scene's parts."""
 
-    def __init__(self, filename, output, quiet):
+    def __init__(self, filename, output, quiet, default_width=DEFAULT_WIDTH):
         self.filename, self.output, self.quiet = filename, output, quiet
+        self.default_width = default_width
+        self.blender = False  # the stage was written by Blender's exporter
         self.warnings = {}  # kind -> [count, first prim path]
         self.shapes, self.materials, self.instances = [], [], []
         self.cameras, self.environments, self.lights, self.textures = [], [], [], []
@@ -383,8 +391,8 @@ def convert_curves(ctx, prim, path, matrix, timecode, base_material):
     # Widths: diameters, as radii.
     widths = attribute_value(ctx, curves.GetWidthsAttr(), timecode)
     if widths is None or len(widths) == 0:
-        ctx.warn(f"curves without widths (width {DEFAULT_WIDTH} used)", path)
-        radii, radii_interpolation = np.array([[DEFAULT_WIDTH / 2]]), "constant"
+        ctx.warn(f"curves without widths (width {ctx.default_width:g} used)", path)
+        radii, radii_interpolation = np.array([[ctx.default_width / 2]]), "constant"
     else:
         widths = checked_finite(ctx, path, "widths", np.asarray(widths, dtype=np.float64))
         if widths.min() < 0:
@@ -622,8 +630,13 @@ def convert_distant_light(ctx, prim, path, matrix, timecode):
     angle = attribute_value(ctx, light.GetAngleAttr(), timecode)
     if angle:
         ctx.warn("distant light angles (a sharp sun is rendered)", path)
+    emission = light_emission(ctx, light, timecode)
+    if ctx.blender:
+        ctx.warn(f"Blender's suns (intensity x {BLENDER_SUN_SCALE:g}: Blender exports its sun "
+                 f"strength in W/m^2 / {BLENDER_SUN_SCALE:g})", path)
+        emission = [v * BLENDER_SUN_SCALE for v in emission]
     ctx.lights.append({"name": ctx.unique_name(path), "direction": [float(v) for v in direction],
-                       "emission": light_emission(ctx, light, timecode)})
+                       "emission": emission})
 
 
 def convert_dome_light(ctx, prim, path, matrix, timecode):
@@ -744,9 +757,11 @@ def main():
     parser.add_argument("output", help="an empty folder for scene.json and shapes/")
     parser.add_argument("--time", type=float, default=None, help="time code (default: default)")
     parser.add_argument("--hair-material", default="", help="json scene with a hair material")
+    parser.add_argument("--width", type=float, default=DEFAULT_WIDTH,
+                        help=f"width of curves that author none (default {DEFAULT_WIDTH})")
     parser.add_argument("--quiet", action="store_true")
     args = parser.parse_args()
-    ctx = Context(args.input, args.output, args.quiet)
+    ctx = Context(args.input, args.output, args.quiet, args.width)
     try:
         extension = os.path.splitext(args.input)[1].lower()
         if extension not in (".usd", ".usda", ".usdc", ".usdz"):
@@ -764,6 +779,9 @@ def main():
             raise ConvertError(f"{args.input}: not a readable USD stage ({message})")
         if stage is None:
             raise ConvertError(f"{args.input}: not a readable USD stage")
+        if not (args.width > 0 and math.isfinite(args.width)):
+            raise ConvertError(f"{args.input}: --width {args.width:g} is not a positive width")
+        ctx.blender = stage.GetRootLayer().documentation.startswith("Blender v")
         timecode = Usd.TimeCode.Default() if args.time is None else Usd.TimeCode(args.time)
         os.makedirs(os.path.join(args.output, "shapes"), exist_ok=True)
         convert_stage(ctx, stage, timecode, base_material)

@@ -451,6 +451,34 @@ class UsdTest(unittest.TestCase):
         self.assertAlmostEqual(fov, expected_fov, places=5)
         light, = scene["distant_lights"]
         self.assert_close([light["direction"]], [blender["sun"]["direction"]], "sun")
+        # Blender writes its 3 W/m^2 sun as intensity 0.75; read back as 3.
+        self.assert_close([light["emission"]], [[blender["sun"]["energy"]] * 3], "sun strength")
+        self.assertIn("Blender's suns (intensity x 4", result.stderr)
+
+    def test_sun_intensity_and_width_option(self):
+        """A DistantLight's intensity is its irradiance (times 2^exposure) in
+        a stage not written by Blender; --width sets the width of curves that
+        author none, and only USD inputs take it."""
+        points = test_points([4])
+        sun = ('def DistantLight "sun" {\n float inputs:intensity = 2\n'
+               ' float inputs:exposure = 1\n float inputs:angle = 0\n}\n')
+        text = curves_stage([4], points, "cubic", "bezier", "nonperiodic") + sun
+        source, output, result = self.convert(text, "groom.usda", "--width", "0.04")
+        self.assertEqual(result.returncode, 0, result.stderr)
+        self.assertIn("curves without widths (width 0.04 used)", result.stderr)
+        self.assertNotIn("Blender", result.stderr)
+        with open(output) as file:
+            scene = json.load(file)
+        self.assert_close([scene["distant_lights"][0]["emission"]], [[4.0] * 3], "sun")
+        vertices, _ = read_ply(os.path.join(os.path.dirname(output), scene["shapes"][0]["uri"]))
+        self.assertTrue(all(abs(r - 0.02) < 1e-9 for r in vertices["radius"]))
+        other = os.path.join(self.dir, "other.json")
+        with open(other, "w") as file:
+            json.dump({"asset": {"version": "4.2"}}, file)
+        result = subprocess.run([YSCENE, "convert", other, os.path.join(self.dir, "x.json"),
+                                 "--width", "0.04"], capture_output=True, text=True, timeout=60)
+        self.assertNotEqual(result.returncode, 0)
+        self.assertIn("--width are for USD inputs", result.stderr)
 
     def test_render_of_a_converted_groom(self):
         points = [[x * 0.1, 0.0, z] for x in range(-3, 4) for z in (0.0, 0.3, 0.6, 1.0)]
