@@ -10,7 +10,13 @@ radius per point), a camera and a sun. Needs Blender 5.0 as a Python module
     python3 -m venv /work/.venv-bpy && /work/.venv-bpy/bin/pip install bpy==5.0.1
     /work/.venv-bpy/bin/python scripts/usd/make_blender_groom.py tests/data/usd
 
-Deterministic for a given Blender (fixed seeds; positions computed here).
+Not deterministic. The hair curves' points and radii, the camera and the sun
+are computed here and come out the same on every run, but Blender 5.0.1
+places the particle hair differently on every run, whatever the particle
+system's seed (with the emission's randomisation off, or the scene's
+threads fixed to 1, as well), and its exporter writes the prims in a
+different order. So the .usda and the .json are a pair from one run:
+regenerate both together, never one of them.
 """
 
 import json
