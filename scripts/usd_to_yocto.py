@@ -21,10 +21,19 @@ What is read (the UsdGeomBasisCurves schema's semantics):
   the points (radii scaled by the cube root of the transform's determinant);
   instance proxies and PointInstancers of curves and meshes.
 - primvars:eumelanin, primvars:pheomelanin, primvars:roughness (-> beta_m and
-  beta_n) on a curves prim: its hair material's values (the mean, with a
-  warning, where they vary). Otherwise --hair-material's material, else
-  primvars:displayColor (constant -> color; uniform, varying or vertex ->
-  a colour per point), else the default: eumelanin 1.3, beta_m = beta_n = 0.3.
+  beta_n) on a curves prim: its hair material's values. A pigment that varies
+  (uniform, varying or vertex) is carried exactly as a colour per point: the
+  material is given by color, and each point's colour is the one whose
+  absorption under the material's beta_n (Chiang et al. 2016 eq. 9, the
+  renderer's hair_sigma_a_from_color) is the sigma_a of its melanin (d'Eon et
+  al. 2011, hair_sigma_a_from_melanin), see melanin_colors. A roughness that
+  varies takes its mean, with a warning (no per-strand carrier). Otherwise
+  --hair-material's material, else primvars:displayColor (constant -> color;
+  uniform, varying or vertex -> a colour per point), else the default:
+  eumelanin 1.3, beta_m = beta_n = 0.3. Per-point quantities of cubic curves
+  follow the points: the curve's basis takes them to the Bezier control
+  points, and the renderer blends the colours of each segment's two end
+  points linearly (so a vertex or varying pigment is exact at segment ends).
 - Mesh (triangulated, smooth normals unless vertex normals are authored; matte
   in its constant displayColor or grey 0.5), Camera (perspective), DistantLight
   (-> distant light of irradiance colour * intensity * 2^exposure), DomeLight
@@ -49,6 +58,13 @@ DEFAULT_WIDTH = 0.01  # scene units, where a curves prim authors no widths
 DEFAULT_HAIR = {"type": "hair", "eumelanin": 1.3, "pheomelanin": 0.0, "beta_m": 0.3,
                 "beta_n": 0.3, "alpha": 2.0, "eta": 1.55}
 BLENDER_SUN_SCALE = 4.0  # Blender exports sun strength / 4 (its usd_writer_light)
+# Absorption of unit eumelanin and pheomelanin (d'Eon et al. 2011), as the
+# renderer's hair_sigma_a_from_melanin (libs/yocto_hair/yocto_hair.cpp).
+EUMELANIN_SIGMA_A = np.array([0.419, 0.697, 1.37])
+PHEOMELANIN_SIGMA_A = np.array([0.187, 0.4, 1.05])
+# The darkest colour hair_sigma_a_from_color takes (it clamps colours to
+# [FLT_MIN, 1]): it stands for sigma_a = (ln FLT_MIN / d(beta_n))^2, over 200.
+DARKEST_COLOR = float(np.finfo(np.float32).tiny)
 CHUNK_CURVES = 65536  # curves converted at a time (bounds the working memory)
 
 # Change of basis to Bezier: rows are the Bezier control points of one
@@ -322,13 +338,46 @@ def expected_size(topology, interpolation, num_points):
             "vertex": num_points}.get(interpolation)
 
 
+def color_denominator(beta_n):
+    """d(beta_n) of Chiang et al. 2016 eq. 9, sigma_a = (ln c / d)^2, with
+    beta_n made usable as the renderer does (clamped to [0.01, 1])."""
+    b = min(max(beta_n, 0.01), 1.0)
+    return 5.969 - 0.215 * b + 2.532 * b ** 2 - 10.73 * b ** 3 + 5.574 * b ** 4 + 0.245 * b ** 5
+
+
+def melanin_colors(ctx, path, pigments, beta_n, warn=True):
+    """Colours (n x 3) whose absorption under beta_n is that of the melanin
+    pairs (n x 2: eumelanin, pheomelanin): per channel the inverse of
+    sigma_a = (ln c / d)^2, c = exp(-sqrt(sigma_a) d). Darker than the
+    darkest colour the renderer takes (sigma_a above (ln FLT_MIN / d)^2):
+    that colour, with a warning."""
+    pigments = np.maximum(pigments, 0)  # as hair_sigma_a_from_melanin
+    sigma_a = pigments[:, :1] * EUMELANIN_SIGMA_A + pigments[:, 1:2] * PHEOMELANIN_SIGMA_A
+    colors = np.exp(-np.sqrt(sigma_a) * color_denominator(beta_n))
+    if warn and (colors < DARKEST_COLOR).any():
+        ctx.warn(f"points darker than a colour can carry (sigma_a above "
+                 f"{(math.log(DARKEST_COLOR) / color_denominator(beta_n)) ** 2:.4g}: "
+                 f"clamped to it)", path)
+    return np.clip(colors, DARKEST_COLOR, 1.0)
+
+
+class PointColors:
+    """A colour per point of a curves prim: authored quantities (primvar
+    name, values as rows, interpolation), each taken to the points as the
+    points are, then made colours by to_colors (rows of all quantities side
+    by side -> rows of red, green, blue)."""
+
+    def __init__(self, quantities, to_colors):
+        self.quantities, self.to_colors = quantities, to_colors
+
+
 def read_curves_material(ctx, prim, path, timecode, base_material):
     """The hair material of a curves prim (see the module's doc) and its
-    per-point colours' (values, interpolation) if displayColor varies."""
+    PointColors where a pigment or displayColor varies (else None)."""
     from pxr import UsdGeom
     api = UsdGeom.PrimvarsAPI(prim)
     material = dict(base_material[1])
-    hair_values = {}
+    hair_values, varying = {}, {}
     for name in ("eumelanin", "pheomelanin", "roughness"):
         values, interpolation = primvar_value(ctx, api.GetPrimvar(name), timecode)
         if values is None:
@@ -339,10 +388,34 @@ def read_curves_material(ctx, prim, path, timecode, base_material):
         if values.min() < 0:
             ctx.fail(path, f"primvars:{name} has a negative value ({values.min():g})")
         if values.max() != values.min():
-            ctx.warn(f"primvars:{name} varying along the groom (its mean is used)", path)
+            if name == "roughness":
+                ctx.warn("primvars:roughness varying along the groom (its mean is used: "
+                         "roughness has no per-strand carrier)", path)
+            else:
+                varying[name] = (name, values.reshape(-1, 1), interpolation)
         hair_values[name] = float(values.mean())
+    if "roughness" in hair_values:
+        material["beta_m"] = material["beta_n"] = min(max(hair_values["roughness"], 0.0), 1.0)
     colors = None
-    if "eumelanin" in hair_values or "pheomelanin" in hair_values:
+    if varying:
+        # Pigments as colours per point under the material's beta_n.
+        beta_n = material.get("beta_n", DEFAULT_HAIR["beta_n"])
+        beta_n = beta_n if beta_n == beta_n else DEFAULT_HAIR["beta_n"]  # NaN, as the renderer
+        material["beta_n"] = beta_n
+        unused = [key for key in ("tip_eumelanin", "tip_pheomelanin", "tip_color", "tip_sigma_a")
+                  if key in material]
+        if unused:
+            ctx.warn(f"--hair-material {', '.join(unused)} with varying pigment primvars (not "
+                     f"used: the pigment is carried as colours per point)", path)
+        for key in ("eumelanin", "pheomelanin", "sigma_a", "tint", *unused):
+            material.pop(key, None)
+        quantities = [varying.get(name, (name, np.array([[hair_values.get(name, 0.0)]]),
+                                         "constant"))
+                      for name in ("eumelanin", "pheomelanin")]
+        mean = np.array([[hair_values.get("eumelanin", 0.0), hair_values.get("pheomelanin", 0.0)]])
+        material["color"] = [float(v) for v in melanin_colors(ctx, path, mean, beta_n, False)[0]]
+        colors = PointColors(quantities, lambda rows: melanin_colors(ctx, path, rows, beta_n))
+    elif "eumelanin" in hair_values or "pheomelanin" in hair_values:
         for key in ("color", "sigma_a", "tint"):
             material.pop(key, None)
         material["eumelanin"] = hair_values.get("eumelanin", 0.0)
@@ -358,11 +431,10 @@ def read_curves_material(ctx, prim, path, timecode, base_material):
                 material["color"] = [float(v) for v in values[0]]
             else:
                 material["color"] = [float(v) for v in values.mean(axis=0)]
-                colors = (values, interpolation)
+                colors = PointColors([("displayColor", values, interpolation)],
+                                     lambda rows: np.clip(rows, 0, 1))
     elif api.GetPrimvar("displayColor").HasValue():
         ctx.warn("primvars:displayColor of curves with --hair-material (not used)", path)
-    if "roughness" in hair_values:
-        material["beta_m"] = material["beta_n"] = min(max(hair_values["roughness"], 0.0), 1.0)
     return material, colors
 
 
@@ -406,10 +478,11 @@ def convert_curves(ctx, prim, path, matrix, timecode, base_material):
         radii = (widths / 2).reshape(-1, 1)
     material, colors = read_curves_material(ctx, prim, path, timecode, base_material)
     if colors is not None:
-        size = expected_size(topology, colors[1], len(points))
-        if size is None or len(colors[0]) != size:
-            ctx.fail(path, f"primvars:displayColor has {len(colors[0])} elements, {colors[1]} "
-                     f"interpolation needs {size}")
+        for name, values, interpolation in colors.quantities:
+            size = expected_size(topology, interpolation, len(points))
+            if size is None or len(values) != size:
+                ctx.fail(path, f"primvars:{name} has {len(values)} elements, {interpolation} "
+                         f"interpolation needs {size}")
     for name, what in (("normals", "curve normals (ribbons; rendered as tubes)"),
                        ("velocities", "curve velocities (no motion blur)"),
                        ("accelerations", "curve accelerations (no motion blur)"),
@@ -447,9 +520,12 @@ def write_lines(ctx, filename, topology, points, radii, radii_interpolation, col
                    np.full(len(points), radii[0, 0]))
     names = ["x", "y", "z", "radius"]
     if colors is not None:
-        values, interpolation = colors
-        per_point = values if interpolation in ("vertex", "varying") else values[curve_of_point]
-        columns += [per_point[:, 0], per_point[:, 1], per_point[:, 2]]
+        per_point = np.concatenate([
+            values if interpolation in ("vertex", "varying") else
+            values[curve_of_point] if interpolation == "uniform" else
+            np.broadcast_to(values[0], (len(points), values.shape[1]))
+            for _, values, interpolation in colors.quantities], axis=1)
+        columns += list(colors.to_colors(per_point).T)
         names += ["red", "green", "blue"]
     segments = topology.segments
     curve = np.repeat(np.arange(len(counts)), segments)
@@ -487,8 +563,11 @@ def write_curves(ctx, filename, topology, points, radii, radii_interpolation, co
                           per_curve_values(topology, radii, radii_interpolation, first, last,
                                            curve, index)]
             if colors is not None:
-                quantities.append(np.clip(per_curve_values(
-                    topology, colors[0], colors[1], first, last, curve, index), 0, 1))
+                authored = np.concatenate([
+                    per_curve_values(topology, values, interpolation, first, last, curve, index)
+                    for _, values, interpolation in colors.quantities], axis=2)
+                quantities.append(colors.to_colors(authored.reshape(
+                    -1, authored.shape[2])).reshape(len(curve), 4, 3))
             # Each curve's first control point, then every segment's last three.
             seg_start = np.concatenate([[0], np.cumsum(segments[first:last])[:-1]])
             columns = []

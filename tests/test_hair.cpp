@@ -219,11 +219,29 @@ TEST(hair, sigma_a_from_color) {
   EXPECT_NEAR(a.y, 0.0554260756f, 1e-7f);
   EXPECT_NEAR(a.z, 0.000320154f, 1e-8f);
   // At beta_n = 1 the denominator is 3.375: (ln 0.5 / 3.375)^2; colour 0 is
-  // clamped to 1e-4: (ln 1e-4 / 3.375)^2; white absorbs nothing.
+  // clamped to the smallest normal float: (ln 2^-126 / 3.375)^2 = 669.6447;
+  // white absorbs nothing.
   auto b = hair_sigma_a_from_color({0.5f, 0, 1}, 1);
   EXPECT_NEAR(b.x, 0.0421796885f, 1e-7f);
-  EXPECT_NEAR(b.y, 7.447385f, 1e-5f);
+  EXPECT_NEAR(b.y, 669.6447f, 1e-3f);
   EXPECT_EQ(b.z, 0.0f);
+}
+
+TEST(hair, sigma_a_from_color_inverts) {
+  // c = exp(-sqrt(sigma_a) d(beta_n)) gives back sigma_a (1e-5 relative) for
+  // sigma_a from a faint tint to black hair (eumelanin 8: 10.96 in blue) and
+  // past it, up to the limit (ln FLT_MIN / d)^2 (over 200): USD import carries
+  // per-point melanin as such colours.
+  for (auto beta_n : {0.01f, 0.3f, 0.7f, 1.0f}) {
+    auto d = 5.969f - 0.215f * beta_n + 2.532f * sqr(beta_n) -
+             10.73f * beta_n * sqr(beta_n) + 5.574f * sqr(sqr(beta_n)) +
+             0.245f * beta_n * sqr(sqr(beta_n));
+    for (auto sigma_a : {0.01f, 0.2f, 1.0f, 4.11f, 10.96f, 50.0f, 200.0f}) {
+      auto c = std::exp(-std::sqrt(sigma_a) * d);
+      auto s = hair_sigma_a_from_color({c, c, c}, beta_n);
+      EXPECT_NEAR(s.x / sigma_a, 1, 1e-5f) << "beta_n " << beta_n << " sigma_a " << sigma_a;
+    }
+  }
 }
 
 TEST(hair, material_precedence) {

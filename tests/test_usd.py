@@ -17,6 +17,7 @@ scripts/test.sh runs); without it, prints why it is skipped and exits 77.
 import json
 import math
 import os
+import shutil
 import struct
 import subprocess
 import sys
@@ -368,6 +369,142 @@ class UsdTest(unittest.TestCase):
                                                   extra=extra), "--hair-material", material_file)
         self.assertEqual(scene["materials"][0]["eumelanin"], 4.0)
         self.assertNotIn("color", scene["materials"][0])
+
+    def assert_melanin_colors(self, output, vertices, rows, expected, what):
+        """Each point's colour gives, under the material's beta_n through the
+        renderer's mapping (Chiang et al. 2016 eq. 9, colours clamped to
+        [FLT_MIN, 1], as hair_sigma_a_from_color), the sigma_a of its
+        expected (eumelanin, pheomelanin) (d'Eon et al. 2011): 1e-4 relative.
+        The mapping written here is checked against the renderer's own on
+        the material's colour, through yscene info --json."""
+        result = subprocess.run([YSCENE, "info", "--json", output], capture_output=True,
+                                text=True, timeout=60)
+        self.assertEqual(result.returncode, 0, result.stderr)
+        material = json.loads(result.stdout)["materials"][0]
+        self.assertEqual(material["type"], "hair")
+        self.assertEqual(material["sigma_a_from"], "color")  # so per-point colours count
+        b = min(max(material["beta_n"], 0.01), 1.0)
+        d = 5.969 - 0.215 * b + 2.532 * b ** 2 - 10.73 * b ** 3 + 5.574 * b ** 4 + 0.245 * b ** 5
+        floor = 2.0 ** -126
+        for c, sigma_a in zip(material["color"], material["sigma_a"]):
+            self.assertLess(abs((math.log(max(c, floor)) / d) ** 2 - sigma_a), 1e-5 * sigma_a)
+        indices = [i for row in rows for i in row]
+        self.assertEqual(len(indices), len(expected), what)
+        for i, (eumelanin, pheomelanin) in zip(indices, expected):
+            wanted = [max(eumelanin, 0) * e + max(pheomelanin, 0) * p
+                      for e, p in zip((0.419, 0.697, 1.37), (0.187, 0.4, 1.05))]
+            for channel, name in enumerate(("red", "green", "blue")):
+                color = vertices[name][i]
+                self.assertTrue(floor <= color <= 1, f"{what}: vertex {i}: colour {color}")
+                sigma_a = (math.log(color) / d) ** 2
+                self.assertLess(abs(sigma_a - wanted[channel]), 1e-4 * wanted[channel],
+                                f"{what}: vertex {i} {name}: sigma_a {sigma_a} != "
+                                f"{wanted[channel]}")
+
+    def test_per_curve_melanin_becomes_colors(self):
+        """A uniform eumelanin (0.2, 1, 3 on three curves) with a constant
+        pheomelanin and roughness: every point of a curve carries the curve's
+        absorption exactly, as a colour under beta_n = the roughness."""
+        counts = [4, 4, 4]  # catmullRom pinned: 3 segments each
+        points = test_points(counts, seed=11)
+        extra = ("        float[] primvars:eumelanin = [0.2, 1, 3] (interpolation = \"uniform\")\n"
+                 "        float primvars:pheomelanin = 0.25 (interpolation = \"constant\")\n"
+                 "        float primvars:roughness = 0.4 (interpolation = \"constant\")")
+        text = curves_stage(counts, points, "cubic", "catmullRom", "pinned", [0.02], "constant",
+                            extra=extra)
+        _, output, result = self.convert(text)
+        self.assertEqual(result.returncode, 0, result.stderr)
+        self.assertNotIn("primvars:eumelanin", result.stderr)  # no "mean" warning
+        with open(output) as file:
+            scene = json.load(file)
+        vertices, (_, rows) = read_ply(os.path.join(os.path.dirname(output),
+                                                    scene["shapes"][0]["uri"]))
+        self.assertAlmostEqual(scene["materials"][0]["beta_n"], 0.4, places=6)
+        self.assertEqual(len(rows), 9)
+        expected = [(m, 0.25) for m in (0.2, 1.0, 3.0) for _ in range(3 * 4)]
+        self.assert_melanin_colors(output, vertices, rows, expected, "per curve")
+        # Black hair (eumelanin 8) is carried too; past (ln FLT_MIN / d)^2 a
+        # warning and the darkest colour.
+        text = curves_stage(counts, points, "cubic", "catmullRom", "pinned", [0.02], "constant",
+                            extra=extra.replace("[0.2, 1, 3]", "[8, 1, 500]"))
+        _, output, result = self.convert(text)
+        self.assertEqual(result.returncode, 0, result.stderr)
+        self.assertIn("points darker than a colour can carry", result.stderr)
+        with open(output) as file:
+            scene = json.load(file)
+        vertices, (_, rows) = read_ply(os.path.join(os.path.dirname(output),
+                                                    scene["shapes"][0]["uri"]))
+        expected = [(m, 0.25) for m in (8.0, 1.0) for _ in range(3 * 4)]
+        self.assert_melanin_colors(output, vertices, rows[:6], expected, "black hair")
+        self.assertEqual({vertices["blue"][i] for row in rows[6:] for i in row}, {2.0 ** -126})
+        # A count that does not match the interpolation is an error.
+        shutil.rmtree(os.path.join(self.dir, "out"))
+        text = curves_stage(counts, points, "cubic", "catmullRom", "pinned", [0.02], "constant",
+                            extra=extra.replace("[0.2, 1, 3]", "[0.2, 1]"))
+        self.assert_fails(text, "/groom/hair", "primvars:eumelanin has 2 elements",
+                          "uniform interpolation needs 3")
+
+    def test_per_vertex_melanin_becomes_colors(self):
+        """A vertex eumelanin and pheomelanin: on linear curves each point's
+        own; on cubic (catmullRom, pinned) curves the values the curve's basis
+        gives its Bezier control points (exact on the curve at segment ends,
+        where the renderer reads per-point colours)."""
+        counts = [5, 3]
+        eumelanin = [0.2, 1.0, 3.0, 2.0, 0.5, 0.1, 4.0, 0.7]
+        pheomelanin = [0.0, 0.3, 0.1, 0.0, 0.6, 0.2, 0.0, 0.4]
+        extra = (f"        float[] primvars:eumelanin = {eumelanin} (interpolation = \"vertex\")\n"
+                 f"        float[] primvars:pheomelanin = {pheomelanin} "
+                 f"(interpolation = \"vertex\")")
+        points = test_points(counts, seed=13)
+        for kind in ("linear", "cubic"):
+            with self.subTest(kind=kind):
+                text = curves_stage(counts, points, kind, "catmullRom", "pinned", [0.02],
+                                    "constant", extra=extra)
+                _, scene, shapes = self.converted(text)
+                (vertices, (element, rows)), = shapes
+                self.assertEqual(element, "line" if kind == "linear" else "curve")
+                self.assertAlmostEqual(scene["materials"][0]["beta_n"], 0.3, places=6)
+                expected, offset = [], 0
+                for n in counts:
+                    values = [[eumelanin[k], pheomelanin[k], 0]
+                              for k in range(offset, offset + n)]
+                    if kind == "linear":
+                        expected += [(v[0], v[1]) for a, b in zip(values[:-1], values[1:])
+                                     for v in (a, b)]
+                    else:
+                        for segment in schema_segments("catmullRom", "pinned", values):
+                            expected += [(v[0], v[1])
+                                         for v in bezier_of("catmullRom", *segment)]
+                    offset += n
+                output = os.path.join(self.dir, "out", "scene.json")
+                self.assert_melanin_colors(output, vertices, rows, expected, kind)
+
+    def test_render_of_varying_melanin(self):
+        """Two strands, eumelanin 0.2 (left) and 3 (right) in one prim, under
+        a white sky: the right half of the image is the darker (64 px, 4 spp)."""
+        points = [[x, y, 0.0] for x in (-0.3, 0.3) for y in (-0.5, -0.1, 0.2, 0.5)]
+        camera = ('def Camera "camera" {\n  double3 xformOp:translate = (0, 0, 3)\n'
+                  '  uniform token[] xformOpOrder = ["xformOp:translate"]\n}\n'
+                  'def DomeLight "sky" {\n float inputs:intensity = 1\n}\n')
+        extra = "        float[] primvars:eumelanin = [0.2, 3] (interpolation = \"uniform\")"
+        text = curves_stage([4, 4], points, "cubic", "catmullRom", "pinned", [0.12],
+                            "constant", extra=extra) + camera
+        _, output, result = self.convert(text)
+        self.assertEqual(result.returncode, 0, result.stderr)
+        image = os.path.join(self.dir, "image.pfm")
+        result = subprocess.run([YSCENE, "render", output, "--resolution", "64", "--samples",
+                                 "4", "--output", image, "--quiet"],
+                                capture_output=True, text=True, timeout=60)
+        self.assertEqual(result.returncode, 0, result.stderr)
+        width, height, values = read_pfm(image)
+        halves = [[], []]
+        for y in range(height):
+            for x in range(width):
+                pixel = values[3 * (y * width + x):3 * (y * width + x) + 3]
+                halves[0 if x < width // 2 else 1].append(sum(pixel) / 3)
+        light, dark = (sum(h) / len(h) for h in halves)
+        # The sky fills the same area of both halves (1 each): the strands differ.
+        self.assertLess(dark, light - 0.05, (light, dark))  # measured: 0.95 against 0.83
 
     def assert_fails(self, text, *needles, name="groom.usda"):
         source, output, result = self.convert(text, name)

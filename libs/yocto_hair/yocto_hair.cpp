@@ -10,6 +10,7 @@
 
 #include <array>
 #include <cstdint>
+#include <limits>
 
 // -----------------------------------------------------------------------------
 // BUILDING BLOCKS
@@ -162,13 +163,16 @@ vec3f hair_sigma_a_from_melanin(float eumelanin, float pheomelanin) {
 }
 
 vec3f hair_sigma_a_from_color(const vec3f& color, float beta_n) {
-  // Chiang et al. 2016, eq. 9. Colour 0 would need infinite absorption.
+  // Chiang et al. 2016, eq. 9. Colour 0 would need infinite absorption: the
+  // smallest normal float stands for it, so that every sigma_a up to
+  // (ln FLT_MIN / denom)^2 (over 200 at any beta_n) has a colour that gives
+  // it exactly (USD import carries per-point melanin as such colours).
   auto b     = beta_n;
   auto denom = 5.969f - 0.215f * b + 2.532f * sqr(b) - 10.73f * b * sqr(b) +
                5.574f * sqr(sqr(b)) + 0.245f * b * sqr(sqr(b));
   auto sigma_a = vec3f{0, 0, 0};
   for (auto c = 0; c < 3; c++) {
-    sigma_a[c] = sqr(std::log(std::clamp(color[c], 1e-4f, 1.0f)) / denom);
+    sigma_a[c] = sqr(std::log(std::clamp(color[c], std::numeric_limits<float>::min(), 1.0f)) / denom);
   }
   return sigma_a;
 }

@@ -219,7 +219,10 @@ vec3f eval_hair_albedo(const hair_brdf& brdf, const vec3f& outgoing);
 // (d'Eon et al. 2011); negative concentrations count as 0.
 vec3f hair_sigma_a_from_melanin(float eumelanin, float pheomelanin);
 // Absorption coefficient giving roughly the color c after multiple
-// scattering (Chiang et al. 2016, section 4.2). c is clamped to [1e-4, 1].
+// scattering (Chiang et al. 2016, section 4.2). c is clamped to [FLT_MIN, 1]
+// (the smallest normal float). Per channel it is invertible,
+// c = exp(-sqrt(sigma_a) d(beta_n)) with d the polynomial of eq. 9, for every
+// sigma_a up to (ln FLT_MIN / d)^2 (over 200 at any beta_n).
 vec3f hair_sigma_a_from_color(const vec3f& color, float beta_n);
 
 }  // namespace yocto
