@@ -135,6 +135,13 @@ def curves_prim(name, counts, points, kind="cubic", basis="bezier", wrap="nonper
     return "\n".join(lines)
 
 
+def camera_and_sky(position):
+    """A camera at position looking along -z and a white sky of 1."""
+    return (f'def Camera "camera" {{\n  double3 xformOp:translate = {tuple(position)}\n'
+            '  uniform token[] xformOpOrder = ["xformOp:translate"]\n}\n'
+            'def DomeLight "sky" {\n float inputs:intensity = 1\n}\n')
+
+
 def test_points(counts, seed=1):
     """Deterministic, irregular points (a little LCG: no random module)."""
     state, out = seed, []
@@ -370,6 +377,18 @@ class UsdTest(unittest.TestCase):
         self.assertEqual(scene["materials"][0]["eumelanin"], 4.0)
         self.assertNotIn("color", scene["materials"][0])
 
+    def render_converted(self, text, resolution, samples):
+        """Converts a stage and renders it: the image's width, height and
+        values (PFM)."""
+        _, output, result = self.convert(text)
+        self.assertEqual(result.returncode, 0, result.stderr)
+        image = os.path.join(self.dir, "image.pfm")
+        result = subprocess.run([YSCENE, "render", output, "--resolution", str(resolution),
+                                 "--samples", str(samples), "--output", image, "--quiet"],
+                                capture_output=True, text=True, timeout=60)
+        self.assertEqual(result.returncode, 0, result.stderr)
+        return read_pfm(image)
+
     def assert_melanin_colors(self, output, vertices, rows, expected, what):
         """Each point's colour gives, under the material's beta_n through the
         renderer's mapping (Chiang et al. 2016 eq. 9, colours clamped to
@@ -483,20 +502,10 @@ class UsdTest(unittest.TestCase):
         """Two strands, eumelanin 0.2 (left) and 3 (right) in one prim, under
         a white sky: the right half of the image is the darker (64 px, 4 spp)."""
         points = [[x, y, 0.0] for x in (-0.3, 0.3) for y in (-0.5, -0.1, 0.2, 0.5)]
-        camera = ('def Camera "camera" {\n  double3 xformOp:translate = (0, 0, 3)\n'
-                  '  uniform token[] xformOpOrder = ["xformOp:translate"]\n}\n'
-                  'def DomeLight "sky" {\n float inputs:intensity = 1\n}\n')
         extra = "        float[] primvars:eumelanin = [0.2, 3] (interpolation = \"uniform\")"
         text = curves_stage([4, 4], points, "cubic", "catmullRom", "pinned", [0.12],
-                            "constant", extra=extra) + camera
-        _, output, result = self.convert(text)
-        self.assertEqual(result.returncode, 0, result.stderr)
-        image = os.path.join(self.dir, "image.pfm")
-        result = subprocess.run([YSCENE, "render", output, "--resolution", "64", "--samples",
-                                 "4", "--output", image, "--quiet"],
-                                capture_output=True, text=True, timeout=60)
-        self.assertEqual(result.returncode, 0, result.stderr)
-        width, height, values = read_pfm(image)
+                            "constant", extra=extra) + camera_and_sky((0, 0, 3))
+        width, height, values = self.render_converted(text, 64, 4)
         halves = [[], []]
         for y in range(height):
             for x in range(width):
@@ -620,19 +629,9 @@ class UsdTest(unittest.TestCase):
     def test_render_of_a_converted_groom(self):
         points = [[x * 0.1, 0.0, z] for x in range(-3, 4) for z in (0.0, 0.3, 0.6, 1.0)]
         counts = [4] * 7
-        camera = ('def Camera "camera" {\n  double3 xformOp:translate = (0, -0.2, 4)\n'
-                  '  uniform token[] xformOpOrder = ["xformOp:translate"]\n}\n'
-                  'def DomeLight "sky" {\n float inputs:intensity = 1\n}\n')
         text = curves_stage(counts, points, "cubic", "catmullRom", "pinned", [0.05],
-                            "constant") + camera
-        source, output, result = self.convert(text)
-        self.assertEqual(result.returncode, 0, result.stderr)
-        image = os.path.join(self.dir, "image.pfm")
-        result = subprocess.run([YSCENE, "render", output, "--resolution", "32", "--samples",
-                                 "2", "--output", image, "--quiet"],
-                                capture_output=True, text=True, timeout=60)
-        self.assertEqual(result.returncode, 0, result.stderr)
-        width, height, values = read_pfm(image)
+                            "constant") + camera_and_sky((0, -0.2, 4))
+        width, height, values = self.render_converted(text, 32, 2)
         self.assertEqual(max(width, height), 32)
         self.assertTrue(all(v == v and abs(v) < 1e30 for v in values))
         self.assertGreater(max(values), 0)
