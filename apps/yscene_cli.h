@@ -186,6 +186,27 @@ struct convert_options {
 CLI::App* add_convert_command(CLI::App& app, convert_options& options, std::string& max_memory);
 int       run_convert(const convert_options& options);
 
+// A temporary folder that removes itself, with everything in it, when it goes.
+struct temporary_folder {
+  std::string path = "";
+  temporary_folder() = default;
+  temporary_folder(const temporary_folder&) = delete;
+  temporary_folder& operator=(const temporary_folder&) = delete;
+  ~temporary_folder();
+};
+
+// USD stages (.usd, .usda, .usdc, .usdz), read by Pixar's usd-core through
+// scripts/usd_to_yocto.py, the one path of convert, render and info.
+bool is_usd_file(const std::string& filename);
+// Converts a USD stage into a json scene in a new temporary `folder`
+// (FOLDER/scene.json). On failure `child_failed` says that the converter has
+// printed its error already; otherwise `error` says what went wrong.
+bool convert_usd_stage(const std::string& input, const convert_options& options,
+    temporary_folder& folder, std::string& error, bool& child_failed);
+// Converts a USD stage and loads the result (checked as any json scene).
+bool load_usd_scene(const std::string& input, yocto::scene_data& scene,
+    const convert_options& options, std::string& error, bool& child_failed);
+
 // -----------------------------------------------------------------------------
 // HAIR GENERATOR
 // -----------------------------------------------------------------------------

@@ -26,7 +26,7 @@ using namespace yocto;
 // USD stages are read by Pixar's usd-core in Python: scripts/usd_to_yocto.py
 // writes a json scene into a temporary folder, which is then loaded as any
 // json scene (so checked) and saved by save_scene like every other input.
-static bool is_usd_file(const std::string& filename) {
+bool is_usd_file(const std::string& filename) {
   auto extension = path_extension(filename);
   return extension == ".usd" || extension == ".usda" || extension == ".usdc" ||
          extension == ".usdz";
@@ -38,14 +38,10 @@ static std::string environment_or(const char* name, const std::string& fallback)
   return value && *value ? std::string(value) : fallback;
 }
 
-// A temporary folder that removes itself with everything in it.
-struct temporary_folder {
-  std::string path = "";
-  ~temporary_folder() {
-    auto ignored = std::error_code{};
-    if (!path.empty()) std::filesystem::remove_all(path, ignored);
-  }
-};
+temporary_folder::~temporary_folder() {
+  auto ignored = std::error_code{};
+  if (!path.empty()) std::filesystem::remove_all(path, ignored);
+}
 
 // Runs the converter on `input` into `folder`: true if it succeeded. The
 // child prints its own warnings and errors ("error: FILE: PRIM: ...") on our
@@ -89,9 +85,8 @@ static bool run_usd_converter(const std::string& input, const std::string& folde
   return false;
 }
 
-// Converts a USD stage into `scene` through a temporary json scene.
-static bool load_usd_scene(const std::string& input, scene_data& scene,
-    const convert_options& options, std::string& error, bool& child_failed) {
+bool convert_usd_stage(const std::string& input, const convert_options& options,
+    temporary_folder& folder, std::string& error, bool& child_failed) {
   child_failed = false;
   if (!options.hair_material.empty()) {
     // Checked here, so that its errors name it and its values are valid.
@@ -110,8 +105,14 @@ static bool load_usd_scene(const std::string& input, scene_data& scene,
     error = input + ": cannot make a temporary folder: " + std::strerror(errno);
     return false;
   }
-  auto folder = temporary_folder{base};
-  if (!run_usd_converter(input, folder.path, options, error, child_failed)) return false;
+  folder.path = base;
+  return run_usd_converter(input, folder.path, options, error, child_failed);
+}
+
+bool load_usd_scene(const std::string& input, scene_data& scene,
+    const convert_options& options, std::string& error, bool& child_failed) {
+  auto folder = temporary_folder{};
+  if (!convert_usd_stage(input, options, folder, error, child_failed)) return false;
   if (!load_scene(path_join(folder.path, "scene.json"), scene, error, nullptr, memory_limit)) {
     error = input + ": the converted scene does not load: " + error;
     return false;

@@ -44,7 +44,16 @@ int run_info(const info_options& options) {
   auto& filename = options.scene;
   auto  scene    = scene_data{};
   auto  error    = std::string{};
-  if (!load_any_scene(filename, scene, error, with_memory_limit())) return print_error(error);
+  if (is_usd_file(filename)) {
+    // Converted on the fly, as convert does (its defaults; warnings on stderr).
+    auto usd          = convert_options{};
+    usd.quiet         = true;
+    auto child_failed = false;
+    if (!load_usd_scene(filename, scene, usd, error, child_failed))
+      return child_failed ? 1 : print_error(error);
+  } else if (!load_any_scene(filename, scene, error, with_memory_limit())) {
+    return print_error(error);
+  }
   auto triangles = (size_t)0, lines = (size_t)0, curves = (size_t)0, vertices = (size_t)0;
   auto bytes = (size_t)0;
   for (auto& shape : scene.shapes) {
@@ -239,7 +248,8 @@ CLI::App* add_info_command(CLI::App& app, info_options& options, std::string& ma
   auto info = app.add_subcommand("info",
       "print a scene's statistics, cameras, materials (with the values rendered), "
       "environments and lights");
-  info->add_option("scene", options.scene, "scene (json, pbrt, pbrt.gz or hair)")->required();
+  info->add_option("scene", options.scene,
+      "scene (json, pbrt, pbrt.gz, hair, or usd, usda, usdc, usdz converted on the fly)")->required();
   info->add_flag("--json", options.json, "the same as json, for programs");
   add_max_memory_option(info, max_memory);
   return info;

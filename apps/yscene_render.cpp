@@ -277,7 +277,28 @@ static int render_scene(const render_options& options, trace_params params,
   auto error   = std::string{};
   // The samples to render: all, or the part's range (of the samples the
   // scene's settings may give).
-  if (!load_render_session(session, settings, params, error)) return print_error(error);
+  {
+    // A USD stage is converted into a temporary folder as convert does (its
+    // defaults), loaded from there, and the folder removed; messages name
+    // the stage.
+    auto usd = temporary_folder{};
+    if (is_usd_file(options.scene)) {
+      auto usd_options  = convert_options{};
+      usd_options.quiet = options.quiet;
+      auto child_failed = false;
+      if (!convert_usd_stage(options.scene, usd_options, usd, error, child_failed))
+        return child_failed ? 1 : print_error(error);
+      settings.scene = path_join(usd.path, "scene.json");
+    }
+    auto loaded = load_render_session(session, settings, params, error);
+    if (!usd.path.empty()) {
+      for (auto at = error.find(settings.scene); at != std::string::npos;
+           at     = error.find(settings.scene, at + options.scene.size()))
+        error.replace(at, settings.scene.size(), options.scene);
+      session.settings.scene = options.scene;
+    }
+    if (!loaded) return print_error(error);
+  }
   if (is_part) {
     if (!parse_sample_range(options.sample_range, session.params.samples, session.first,
             settings.end, error))
@@ -415,8 +436,9 @@ CLI::App* add_render_command(CLI::App& app, render_command& command, std::string
   auto& sequence = command.sequence;
   auto  render   = app.add_subcommand("render", "render a scene to an image");
   render->add_option("scene", options.scene,
-      "scene: json (Yocto/GL), pbrt or pbrt.gz (pbrt-v3/v4), or hair (Cem Yuksel's strands "
-      "under a default sky and camera)")->required();
+      "scene: json (Yocto/GL), pbrt or pbrt.gz (pbrt-v3/v4), hair (Cem Yuksel's strands "
+      "under a default sky and camera), or usd, usda, usdc, usdz (converted on the fly, as "
+      "convert does)")->required();
   render->add_option("--output,-o", options.output, "output image (exr, hdr, pfm, png, jpg)")
       ->required();
   render->add_option("--samples,-s", params.samples, "samples per pixel");

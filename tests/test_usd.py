@@ -515,6 +515,53 @@ class UsdTest(unittest.TestCase):
         # The sky fills the same area of both halves (1 each): the strands differ.
         self.assertLess(dark, light - 0.05, (light, dark))  # measured: 0.95 against 0.83
 
+    def test_render_and_info_convert_on_the_fly(self):
+        """render and info take a USD stage directly: converted into a
+        temporary folder (under TMPDIR, empty again afterwards) as convert
+        does, the same image as a render of convert's output, the same
+        materials in info; a bad stage fails as convert does."""
+        points = [[x, y, 0.0] for x in (-0.3, 0.3) for y in (-0.5, -0.1, 0.2, 0.5)]
+        extra = "        float[] primvars:eumelanin = [0.2, 3] (interpolation = \"uniform\")"
+        text = curves_stage([4, 4], points, "cubic", "catmullRom", "pinned", [0.12],
+                            "constant", extra=extra) + camera_and_sky((0, 0, 3))
+        source, output, result = self.convert(text)
+        self.assertEqual(result.returncode, 0, result.stderr)
+        temporary = os.path.join(self.dir, "tmp")
+        os.mkdir(temporary)
+        environment = dict(os.environ, TMPDIR=temporary)
+        images = []
+        for scene in (output, source):
+            images.append(os.path.join(self.dir, f"image{len(images)}.pfm"))
+            result = subprocess.run([YSCENE, "render", scene, "--resolution", "32", "--samples",
+                                     "2", "--output", images[-1], "--quiet"], env=environment,
+                                    capture_output=True, text=True, timeout=60)
+            self.assertEqual(result.returncode, 0, result.stderr)
+        self.assertEqual(read_pfm(images[0]), read_pfm(images[1]))
+        infos = []
+        for scene in (output, source):
+            result = subprocess.run([YSCENE, "info", "--json", scene], env=environment,
+                                    capture_output=True, text=True, timeout=60)
+            self.assertEqual(result.returncode, 0, result.stderr)
+            infos.append(json.loads(result.stdout))
+        self.assertEqual(infos[0]["materials"], infos[1]["materials"])
+        self.assertEqual(infos[1]["materials"][0]["sigma_a_from"], "color")
+        self.assertEqual(os.listdir(temporary), [])
+        # Errors as convert gives them, the stage named; nothing left behind.
+        bad = self.write("bad.usda", curves_stage([4, 5], points))
+        for command in (["render", bad, "--output", os.path.join(self.dir, "x.png")],
+                        ["info", bad], ["render", source, "--camera", "nowhere", "--output",
+                                        os.path.join(self.dir, "x.png")]):
+            result = subprocess.run([YSCENE, *command], env=environment, capture_output=True,
+                                    text=True, timeout=60)
+            self.assertEqual(result.returncode, 1, command)
+            lines = [l for l in result.stderr.splitlines() if l.startswith("error:")]
+            self.assertEqual(len(lines), 1, result.stderr)
+            self.assertIn("error: " + (bad + ": /groom/hair: curveVertexCounts add up to 9"
+                                       if command[1] == bad else source + ": no camera named"),
+                          lines[0])
+            self.assertFalse(os.path.exists(os.path.join(self.dir, "x.png")))
+            self.assertEqual(os.listdir(temporary), [])
+
     def assert_fails(self, text, *needles, name="groom.usda"):
         source, output, result = self.convert(text, name)
         self.assertNotEqual(result.returncode, 0, result.stdout)
