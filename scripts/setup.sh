@@ -56,30 +56,21 @@ if [ -n "$missing" ]; then
   $sudo env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq $missing
 fi
 
-# Debian's python3 (the one the packages above are for, whatever python3 comes
-# first on PATH); pip only when the venv lacks this exact pyoidn.
-if [ $denoise -eq 1 ]; then
-  venv=.venv/denoise
-  pyoidn=2.5.1.0
-  check="import importlib.metadata as m, sys, pyoidn; sys.exit(m.version('pyoidn') != '$pyoidn')"
+# A venv NAME on Debian's python3 (the one the packages above are for, whatever
+# python3 comes first on PATH) holding PACKAGE==VERSION; pip runs only when the
+# venv lacks that exact version or cannot import MODULES.
+pinned_venv() {
+  local venv=.venv/$1 package=$2 version=$3 modules=$4
+  local check="import importlib.metadata as m, sys, $modules; sys.exit(m.version('$package') != '$version')"
   if ! "$venv/bin/python" -c "$check" 2>/dev/null; then
-    echo "installing: pyoidn $pyoidn into $venv"
+    echo "installing: $package $version into $venv"
     /usr/bin/python3 -m venv --system-site-packages "$venv"
-    "$venv/bin/python" -m pip install --quiet --disable-pip-version-check "pyoidn==$pyoidn"
+    "$venv/bin/python" -m pip install --quiet --disable-pip-version-check "$package==$version"
   fi
-fi
-
-# Pixar's usd-core, pinned, in its own venv (Debian has no USD package).
-if [ $usd -eq 1 ]; then
-  venv=.venv/usd
-  usd_core=26.11
-  check="import importlib.metadata as m, sys, numpy, pxr.Usd; sys.exit(m.version('usd-core') != '$usd_core')"
-  if ! "$venv/bin/python" -c "$check" 2>/dev/null; then
-    echo "installing: usd-core $usd_core into $venv"
-    /usr/bin/python3 -m venv --system-site-packages "$venv"
-    "$venv/bin/python" -m pip install --quiet --disable-pip-version-check "usd-core==$usd_core"
-  fi
-fi
+}
+# OIDN for the denoiser; Pixar's usd-core for USD grooms (Debian has no USD).
+if [ $denoise -eq 1 ]; then pinned_venv denoise pyoidn 2.5.1.0 pyoidn; fi
+if [ $usd -eq 1 ]; then pinned_venv usd usd-core 26.11 "numpy, pxr.Usd"; fi
 
 cmake -S . -B build -G Ninja -DCMAKE_BUILD_TYPE=Release >/dev/null
 cmake --build build -j "$(nproc)"
