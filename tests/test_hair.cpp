@@ -591,7 +591,10 @@ TEST(hair, white_furnace_quadrature) {
         auto pre      = make_hair_precomputed(material);
         auto brdf     = eval_hair_brdf(pre, h, frame3f{});
         auto wo       = local_direction(theta_o, pif / 2);
-        auto [breaks_theta, breaks_phi] = scattering_breaks(pre, material.alpha, theta_o, h);
+        // Named, not a structured binding: C++17 lambdas cannot capture those (clang).
+        auto breaks       = scattering_breaks(pre, material.alpha, theta_o, h);
+        auto& breaks_theta = breaks.first;
+        auto& breaks_phi   = breaks.second;
         auto integral = integrate_panels(breaks_theta, [&](double theta_i) {
           return std::cos(theta_i) * integrate_panels(breaks_phi, [&](double phi) {
             auto wi = local_direction(theta_i, pif / 2 + phi);
@@ -1254,7 +1257,9 @@ TEST(hair, albedo_is_the_integral_of_scattering) {
           auto brdf   = make_albedo_brdf(hit, wo);
           auto albedo = eval_hair_albedo(brdf, wo);
           EXPECT_EQ(eval_hair_albedo(eval_hair_brdf(brdf.material, hit.h, frame3f{}), wo), albedo);
-          auto [breaks_theta, breaks_phi] = scattering_breaks(brdf.material, alpha, theta_o, hit.h);
+          auto breaks       = scattering_breaks(brdf.material, alpha, theta_o, hit.h);
+          auto& breaks_theta = breaks.first;
+          auto& breaks_phi   = breaks.second;
           auto phis     = panel_nodes(breaks_phi);
           auto integral = std::array<double, 7>{};  // R, G, B, then lobes R ... TRRT+
           for (auto [theta_i, weight_theta] : panel_nodes(breaks_theta)) {
