@@ -377,20 +377,19 @@ void pack_fiber_vertices(scene_data& scene) {
 
 void unpack_fiber_vertices(shape_data& shape) {
   if (shape.fiber_vertices.empty()) return;
-  shape.positions.resize(shape.fiber_vertices.size());
-  shape.radius.resize(shape.fiber_vertices.size());
-  for (size_t i = 0; i < shape.fiber_vertices.size(); i++) {
-    auto& vertex       = shape.fiber_vertices[i];
-    shape.positions[i] = {vertex.x, vertex.y, vertex.z};
-    shape.radius[i]    = vertex.w;
+  // Read through the accessors of the packed layout, then freed.
+  auto count = num_vertices(shape);
+  shape.positions.resize(count);
+  shape.radius.resize(count);
+  for (auto i = 0; i < count; i++) {
+    shape.positions[i] = vertex_position(shape, i);
+    shape.radius[i]    = vertex_radius(shape, i);
+  }
+  if (!shape.fiber_curves.empty()) {
+    shape.curves.resize(shape.fiber_curves.size());
+    for (auto i = 0; i < num_curves(shape); i++) shape.curves[i] = curve_vertices(shape, i);
   }
   std::vector<vec4f>{}.swap(shape.fiber_vertices);
-  if (shape.fiber_curves.empty()) return;
-  shape.curves.resize(shape.fiber_curves.size());
-  for (size_t i = 0; i < shape.fiber_curves.size(); i++) {
-    auto first      = shape.fiber_curves[i];
-    shape.curves[i] = {first, first + 1, first + 2, first + 3};
-  }
   std::vector<int>{}.swap(shape.fiber_curves);
 }
 
