@@ -203,9 +203,13 @@ bool is_usd_file(const std::string& filename);
 // printed its error already; otherwise `error` says what went wrong.
 bool convert_usd_stage(const std::string& input, const convert_options& options,
     temporary_folder& folder, std::string& error, bool& child_failed);
-// Converts a USD stage and loads the result (checked as any json scene).
-bool load_usd_scene(const std::string& input, yocto::scene_data& scene,
-    const convert_options& options, std::string& error, bool& child_failed);
+// Loads what load_any_scene reads (within params' memory limit), or a USD
+// stage converted with `usd`'s options and loaded (checked as any json
+// scene): the loader of convert and info. On failure `child_failed` says
+// that the converter has printed its error already.
+bool load_cli_scene(const std::string& filename, yocto::scene_data& scene,
+    const convert_options& usd, const yocto::pbrt_params& params, std::string& error,
+    bool& child_failed);
 
 // -----------------------------------------------------------------------------
 // HAIR GENERATOR

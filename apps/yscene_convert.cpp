@@ -109,10 +109,12 @@ bool convert_usd_stage(const std::string& input, const convert_options& options,
   return run_usd_converter(input, folder.path, options, error, child_failed);
 }
 
-bool load_usd_scene(const std::string& input, scene_data& scene,
-    const convert_options& options, std::string& error, bool& child_failed) {
+bool load_cli_scene(const std::string& input, scene_data& scene, const convert_options& usd,
+    const pbrt_params& params, std::string& error, bool& child_failed) {
+  child_failed = false;
+  if (!is_usd_file(input)) return load_any_scene(input, scene, error, params);
   auto folder = temporary_folder{};
-  if (!convert_usd_stage(input, options, folder, error, child_failed)) return false;
+  if (!convert_usd_stage(input, usd, folder, error, child_failed)) return false;
   if (!load_scene(path_join(folder.path, "scene.json"), scene, error, nullptr, memory_limit)) {
     error = input + ": the converted scene does not load: " + error;
     return false;
@@ -133,16 +135,12 @@ static int convert_scene(const std::string& input, const std::string& output,
   auto scene = scene_data{};
   auto error = std::string{};
   auto start = std::chrono::steady_clock::now();
-  if (is_usd_file(input)) {
-    auto child_failed = false;
-    if (!load_usd_scene(input, scene, options, error, child_failed))
-      return child_failed ? 1 : print_error(error);
-  } else if (!options.usd_time.empty() || !options.hair_material.empty() ||
-             !options.usd_width.empty()) {
+  if (!is_usd_file(input) &&
+      (!options.usd_time.empty() || !options.hair_material.empty() || !options.usd_width.empty()))
     return print_error(input + ": --time, --hair-material and --width are for USD inputs");
-  } else if (!load_any_scene(input, scene, error, with_memory_limit(params))) {
-    return print_error(error);
-  }
+  auto child_failed = false;
+  if (!load_cli_scene(input, scene, options, with_memory_limit(params), error, child_failed))
+    return child_failed ? 1 : print_error(error);
   if (params.curves_as_lines) {
     for (auto& shape : scene.shapes)
       if (!shape.curves.empty()) shape = curves_to_lines(shape, params.segments);

@@ -44,16 +44,13 @@ int run_info(const info_options& options) {
   auto& filename = options.scene;
   auto  scene    = scene_data{};
   auto  error    = std::string{};
-  if (is_usd_file(filename)) {
-    // Converted on the fly, as convert does (its defaults; warnings on stderr).
-    auto usd          = convert_options{};
-    usd.quiet         = true;
-    auto child_failed = false;
-    if (!load_usd_scene(filename, scene, usd, error, child_failed))
-      return child_failed ? 1 : print_error(error);
-  } else if (!load_any_scene(filename, scene, error, with_memory_limit())) {
-    return print_error(error);
-  }
+  // A USD stage is converted on the fly, as convert does (its defaults;
+  // warnings on stderr).
+  auto usd          = convert_options{};
+  usd.quiet         = true;
+  auto child_failed = false;
+  if (!load_cli_scene(filename, scene, usd, with_memory_limit(), error, child_failed))
+    return child_failed ? 1 : print_error(error);
   auto triangles = (size_t)0, lines = (size_t)0, curves = (size_t)0, vertices = (size_t)0;
   auto bytes = (size_t)0;
   for (auto& shape : scene.shapes) {

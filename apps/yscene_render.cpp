@@ -275,8 +275,6 @@ static int render_scene(const render_options& options, trace_params params,
   settings.max_memory           = memory_limit;
   auto session = render_session{};
   auto error   = std::string{};
-  // The samples to render: all, or the part's range (of the samples the
-  // scene's settings may give).
   {
     // A USD stage is converted into a temporary folder as convert does (its
     // defaults), loaded from there, and the folder removed; messages name
@@ -299,6 +297,8 @@ static int render_scene(const render_options& options, trace_params params,
     }
     if (!loaded) return print_error(error);
   }
+  // The samples to render: all, or the part's range (of the samples the
+  // scene's settings may give).
   if (is_part) {
     if (!parse_sample_range(options.sample_range, session.params.samples, session.first,
             settings.end, error))
