@@ -19,10 +19,10 @@ import tempfile
 import time
 import unittest
 
+import venv_main
+
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 DENOISE = os.path.join(ROOT, "scripts", "denoise.py")
-VENV = os.path.join(ROOT, ".venv", "denoise")
-VENV_PYTHON = os.path.join(VENV, "bin", "python")
 YSCENE = None  # set from the command line
 
 # The fur ball: its fibres are thinner than a pixel below about 192 pixels,
@@ -210,21 +210,14 @@ class DenoiseTest(unittest.TestCase):
         self.assertFalse(os.path.exists(output))
 
 
-def main():
+def set_yscene(path):
     global YSCENE
-    if len(sys.argv) < 2:
-        print("usage: python3 tests/test_denoise.py YSCENE_PATH [unittest options]",
-              file=sys.stderr)
-        return 2
-    if os.path.realpath(sys.prefix) != os.path.realpath(VENV):
-        probe = "import numpy, OpenImageIO, pyoidn"
-        if not os.path.isfile(VENV_PYTHON) or run([VENV_PYTHON, "-c", probe]).returncode != 0:
-            print("skipped: pyoidn not installed (bash scripts/setup.sh --denoise)")
-            return 77
-        os.execv(VENV_PYTHON, [VENV_PYTHON, os.path.abspath(__file__), *sys.argv[1:]])
-    YSCENE = os.path.abspath(sys.argv[1])
-    program = unittest.main(argv=[sys.argv[0], *sys.argv[2:]], exit=False, verbosity=2)
-    return 0 if program.result.wasSuccessful() else 1
+    YSCENE = path
+
+
+def main():
+    return venv_main.run_tests_in_venv(
+        __file__, "denoise", "import numpy, OpenImageIO, pyoidn", "pyoidn", set_yscene)
 
 
 if __name__ == "__main__":

@@ -24,9 +24,9 @@ import sys
 import tempfile
 import unittest
 
+import venv_main
+
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-VENV = os.path.join(ROOT, ".venv", "usd")
-VENV_PYTHON = os.path.join(VENV, "bin", "python")
 YSCENE = None  # set from the command line
 TOLERANCE = 1e-5
 
@@ -684,21 +684,14 @@ class UsdTest(unittest.TestCase):
         self.assertGreater(max(values), 0)
 
 
-def main():
+def set_yscene(path):
     global YSCENE
-    if len(sys.argv) < 2:
-        print("usage: python3 tests/test_usd.py YSCENE_PATH [unittest options]", file=sys.stderr)
-        return 2
-    if os.path.realpath(sys.prefix) != os.path.realpath(VENV):
-        probe = "import numpy, pxr.Usd"
-        if not os.path.isfile(VENV_PYTHON) or subprocess.run(
-                [VENV_PYTHON, "-c", probe], capture_output=True).returncode != 0:
-            print("skipped: usd-core not installed (bash scripts/setup.sh --usd)")
-            return 77
-        os.execv(VENV_PYTHON, [VENV_PYTHON, os.path.abspath(__file__), *sys.argv[1:]])
-    YSCENE = os.path.abspath(sys.argv[1])
-    program = unittest.main(argv=[sys.argv[0], *sys.argv[2:]], exit=False, verbosity=2)
-    return 0 if program.result.wasSuccessful() else 1
+    YSCENE = path
+
+
+def main():
+    return venv_main.run_tests_in_venv(
+        __file__, "usd", "import numpy, pxr.Usd", "usd-core", set_yscene)
 
 
 if __name__ == "__main__":
