@@ -462,15 +462,15 @@ CLI::App* add_render_command(CLI::App& app, render_command& command, std::string
   render->add_option("--roulette-threshold", params.roulette_threshold,
           "paths whose throughput falls below this play Russian roulette");
   render->add_flag_callback("--adaptive", [&params] { params.adaptive = trace_adaptive_type::on; },
-      "adaptive sampling always: a pilot gives each pixel more or fewer paths a sample by its "
-      "variance and cost, at the rays of uniform sampling (unbiased); by default it is on "
-      "where the roulette's pilot predicts a gain of 1.7 or more and at most 64 spp");
+      "adaptive sampling (the default): a pilot plans each pixel's paths per camera ray and "
+      "paths per sample from its own variances and cost, at the cost of --samples samples "
+      "a pixel (unbiased)");
   render->add_flag_callback("--no-adaptive",
       [&params] { params.adaptive = trace_adaptive_type::off; },
       "no adaptive sampling: every pixel one path a sample");
   render->add_option("--split", params.split,
-          "paths per camera ray, sharing its first hit (0 = automatic: 2 where the render "
-          "samples adaptively and samples no light, else 1)")
+          "paths per camera ray, sharing its first hit (0 = each pixel's own, from the "
+          "adaptive pilot; 1 without adaptive sampling)")
       ->check(CLI::Range(0, 1024));
   render->add_flag("--allocation,!--no-allocation", params.allocation,
       "shadow rays per region of the scene from the visibility the pilot measured there "

@@ -280,10 +280,11 @@ TEST(merge, renders_with_shadow_allocation_of_ranges_add_up_to_one_render) {
   EXPECT_EQ(off.allocation.cells.x, 0);
 }
 
-// Adaptive sampling: 16 samples at once equal, bit for bit, the exact sums
-// of the parts 0:3, 3:5:9 (two calls) and 9:16 on 1 or 2 threads: every
-// part's pilot finds the render's rates, and a pixel's paths are numbered
-// by sample whatever the range; the merged sums over 16 give the image.
+// The default plan (adaptive rates and each pixel's split): 16 samples at
+// once equal, bit for bit, the exact sums of the parts 0:3, 3:5:9 (two
+// calls) and 9:16 on 1 or 2 threads: every part's pilot finds the render's
+// rates and splits, and a pixel's paths are numbered by sample whatever the
+// range; the merged sums over 16 give the image.
 TEST(merge, adaptive_renders_of_ranges_add_up_to_one_render) {
   auto scene = make_small_hair_scene();
   auto bvh   = scene_bvh{};
@@ -292,7 +293,6 @@ TEST(merge, adaptive_renders_of_ranges_add_up_to_one_render) {
   auto params       = trace_params{};
   params.resolution = 24;
   params.samples    = 16;
-  params.adaptive   = trace_adaptive_type::on;
   params.threads    = 2;
   ASSERT_TRUE(check_trace_params(scene, params, error)) << error;
   auto context = make_trace_context(scene, params);
@@ -300,6 +300,8 @@ TEST(merge, adaptive_renders_of_ranges_add_up_to_one_render) {
   init_trace_state(whole, scene, params);
   trace_samples(whole, scene, bvh, context, params, params.samples);
   ASSERT_FALSE(whole.rates.empty());
+  ASSERT_EQ(whole.splits.size(), whole.sums.size());
+  EXPECT_GT(*std::max_element(whole.splits.begin(), whole.splits.end()), 1);
   auto added = add_up_parts(scene, bvh, context, params, {{0, 3}, {3, 5, 9}, {9, 16}}, whole);
   EXPECT_TRUE(added == whole.sums);
   EXPECT_TRUE(get_image(whole).pixels ==

@@ -200,14 +200,15 @@ std::string format_render_stats(const render_session& session) {
       "stats load_seconds=%.6f bvh_seconds=%.6f bvh_bytes=%lld segments=%zu "
       "bvh_build_peak_bytes=%lld curve_pieces=%zu width=%d height=%d spp=%d "
       "render_seconds=%.6f render_cpu=%.6f rays=%lld peak_memory=%lld clamped=%lld "
-      "clamped_energy=%.6g roulette_threshold=%.6g adaptive=%d adaptive_gain=%.4g split=%d "
+      "clamped_energy=%.6g roulette_threshold=%.6g adaptive=%d adaptive_gain=%.4g split=%.4g "
       "allocation_cells=%d vertices=%lld light_samples=%lld shadow_rays=%lld",
       session.load_seconds, bvh.build_seconds, (long long)bvh.peak_memory, segments,
       (long long)bvh.build_peak_memory, pieces, state.width, state.height, state.samples,
       session.seconds, session.cpu_seconds, (long long)state.rays.load(),
       (long long)process_peak_memory(), (long long)state.clamped.load(),
       clamped_energy_fraction(state), state.roulette_threshold, state.rates.empty() ? 0 : 1,
-      state.adaptive_gain, state.split,
+      state.adaptive_gain,
+      state.paths > 0 ? (double)state.continuations / (double)state.paths : (double)state.split,
       state.allocation.cells.x * state.allocation.cells.y * state.allocation.cells.z,
       (long long)state.vertices.load(), (long long)state.light_samples.load(),
       (long long)state.shadow_rays.load());

@@ -317,7 +317,7 @@ struct trace_shadow_record {
 
 // What paths did on a row of the image (see trace_state).
 struct trace_tally {
-  int64_t vertices = 0, light_samples = 0, shadow_rays = 0;
+  int64_t vertices = 0, light_samples = 0, shadow_rays = 0, paths = 0, continuations = 0;
 };
 
 // The camera ray of a sample of pixel (i, j) of a width x height image; the
@@ -526,9 +526,10 @@ static void scatter_path(const trace_walk& walk, material_point point, ray3f ray
   }
 }
 
-// The path tracer from a camera ray. With params.split > 1 the camera ray
-// and its hit are shared by that many paths from the first scattering vertex
-// on, each weighing 1 / split; path k of sample s draws its numbers as sample
+// The path tracer from a camera ray. With split > 1 the camera ray and its
+// hit are shared by that many paths from the first scattering vertex on,
+// each weighing 1 / split (with `continuations`, split values: what each
+// path brought, for the plan's pilot); path k of sample s draws its numbers as sample
 // s * split + k would, so the split paths of samples first ... end - 1 take
 // exactly the points first * split ... end * split - 1 of every pair of
 // dimensions past the camera's (stratified together, and any sample range
@@ -545,7 +546,8 @@ struct trace_aov_sample {
   bool                 hair     = false;
 };
 static vec3f trace_path(const trace_walk& walk, const ray3f& camera_ray,
-    sequence_state& sequence, trace_aov_sample* aov = nullptr) {
+    sequence_state& sequence, int split, trace_aov_sample* aov = nullptr,
+    vec3f* continuations = nullptr) {
   auto& scene   = walk.scene;
   auto& context = walk.context;
   auto& params  = walk.params;
@@ -567,8 +569,8 @@ static vec3f trace_path(const trace_walk& walk, const ray3f& camera_ray,
     aov->tangent = point.fiber ? point.tangent : point.normal;
   }
   if (params.bounces < 1 || scatters_nothing(point)) return radiance;
-  auto split = std::max(params.split, 1);
-  if (split == 1) {
+  split = std::max(split, 1);
+  if (split == 1 && !continuations) {
     scatter_path(walk, point, camera_ray, 0, {1, 1, 1}, sequence, radiance, lobes);
     return radiance;
   }
@@ -576,7 +578,9 @@ static vec3f trace_path(const trace_walk& walk, const ray3f& camera_ray,
   auto sum    = vec3f{0, 0, 0};
   for (auto k = 0; k < split; k++) {
     sequence.index = sample * (uint32_t)split + (uint32_t)k;
+    auto before    = sum;
     scatter_path(walk, point, camera_ray, 0, {1, 1, 1}, sequence, sum, lobes);
+    if (continuations) continuations[k] = sum - before;
   }
   sequence.index = sample;
   if (aov) {
@@ -589,7 +593,7 @@ vec3f trace_radiance(const scene_data& scene, const scene_bvh& bvh,
     const trace_context& context, const ray3f& ray, sequence_state& sequence,
     const trace_params& params, int64_t& rays) {
   auto threshold = params.roulette_threshold > 0 ? params.roulette_threshold : 1.0f;
-  return trace_path({scene, bvh, context, params, threshold, rays}, ray, sequence);
+  return trace_path({scene, bvh, context, params, threshold, rays}, ray, sequence, params.split);
 }
 
 }  // namespace yocto
@@ -601,30 +605,8 @@ namespace yocto {
 
 // Most paths a sample of an adaptive pixel.
 static const int adaptive_max_paths = 16;
-
-// Measured limits of the automatic choice (see the header).
-static const float adaptive_auto_min_gain       = 1.7f;
-static const float adaptive_auto_min_split_gain = 1.4f;
-static const int   adaptive_auto_max_samples    = 64;
-
-bool use_adaptive_sampling(
-    const trace_params& params, float adaptive_gain, bool area_lights) {
-  if (params.adaptive != trace_adaptive_type::automatic)
-    return params.adaptive == trace_adaptive_type::on;
-  auto with_split = !area_lights && params.split != 1;
-  return params.samples <= adaptive_auto_max_samples &&
-         adaptive_gain >= (with_split ? adaptive_auto_min_split_gain : adaptive_auto_min_gain);
-}
-
-int choose_path_split(const trace_params& params, bool adaptive, bool area_lights) {
-  if (params.split > 0) return params.split;
-  return adaptive && !area_lights ? 2 : 1;
-}
-
-// Whether the render may sample adaptively, before its pilot says.
-static bool may_use_adaptive_sampling(const trace_params& params) {
-  return use_adaptive_sampling(params, std::numeric_limits<float>::max());
-}
+// Most paths a camera ray of the per-pixel plan.
+static const int trace_max_split = 8;
 
 bool check_trace_params(const scene_data& scene, const trace_params& params,
     std::string& error) {
@@ -637,15 +619,16 @@ bool check_trace_params(const scene_data& scene, const trace_params& params,
   if (params.bounces < 1) return error = "bounces must be at least 1", false;
   if (params.split < 0 || params.split > 1024)
     return error = "split must be 0 (automatic) or in [1, 1024]", false;
-  // Split paths number their samples sample * split + k in 32 bits (for an
-  // automatic split, its largest choice: adaptive, no light sampled).
-  auto split = choose_path_split(params, true, false);
+  // Split paths number their samples sample * split + k in 32 bits (for
+  // the per-pixel plan, its largest split), adaptive pixels up to 16 paths a
+  // sample too.
+  auto adaptive = params.adaptive != trace_adaptive_type::off;
+  auto split    = params.split > 0 ? params.split : adaptive ? trace_max_split : 1;
   if ((int64_t)params.samples * split > ((int64_t)1 << 32))
     return error = "samples times split must stay below 2^32", false;
-  // Adaptive pixels take up to 16 paths a sample, numbered in 32 bits too.
-  if (may_use_adaptive_sampling(params) &&
-      (int64_t)params.samples * split * adaptive_max_paths > ((int64_t)1 << 32))
-    return error = "samples times split times 16 must stay below 2^32 with adaptive sampling",
+  if (adaptive && (int64_t)params.samples * split * adaptive_max_paths > ((int64_t)1 << 32))
+    return error = "samples times split (8 if automatic) times 16 must stay below 2^32 "
+                   "with adaptive sampling",
            false;
   if (!(params.roulette_threshold >= 0) || !std::isfinite(params.roulette_threshold))
     return error = "roulette threshold must be 0 (automatic) or positive", false;
@@ -656,8 +639,11 @@ bool check_trace_params(const scene_data& scene, const trace_params& params,
 
 double trace_image_bytes(const scene_data& scene, const trace_params& params) {
   auto size = camera_resolution(scene.cameras[params.camera], params.resolution);
-  // Adaptive sampling: the rates, and the pilot's variances, costs and a row.
-  auto adaptive = may_use_adaptive_sampling(params) ? sizeof(float) + 3 * sizeof(double) : 0;
+  // Adaptive sampling: the rates and splits, and the pilot's three buffers
+  // and a row.
+  auto adaptive = params.adaptive != trace_adaptive_type::off
+                      ? sizeof(float) + sizeof(uint8_t) + 4 * sizeof(double)
+                      : 0;
   return (double)size.x * (double)size.y *
              (sizeof(fixed_sum3) + sizeof(vec3f) + 3 * sizeof(uint8_t) + adaptive) +
          trace_aov_bytes(scene, params);
@@ -729,9 +715,11 @@ void init_trace_state(trace_state& state, const scene_data& scene, const trace_p
   state.roulette_threshold = 0;
   state.adaptive_gain      = 0;
   state.rates.clear();
+  state.splits.clear();
   state.split      = 0;
   state.allocation = {};
   state.vertices = 0, state.light_samples = 0, state.shadow_rays = 0;
+  state.paths = 0, state.continuations = 0;
 }
 
 // Runs f(begin, end) over [0, size) in chunks on `threads` threads (0 for
@@ -812,10 +800,9 @@ static trace_allocation make_trace_allocation(
 // threshold), with a threshold of 0.5 (between the extremes of the benchmark
 // scenes); the spread of the two sets' means gives V as the render's
 // stratified numbers make it. The tails are those of the pilot's own
-// roulette, each weighted by the inverse of its survival probability. The
-// 16 paths of a grid pixel also give its variance and rays per path, for the
-// gain of adaptive sampling (see trace_pilot) and, with params.allocation,
-// its shadow rays the allocation's visibility (see make_trace_allocation).
+// roulette, each weighted by the inverse of its survival probability. With
+// params.allocation, its shadow rays give the allocation's visibility (see
+// make_trace_allocation).
 trace_pilot run_trace_pilot(const scene_data& scene, const scene_bvh& bvh,
     const trace_context& context, const trace_params& params) {
   auto size   = camera_resolution(scene.cameras[params.camera], params.resolution);
@@ -836,9 +823,6 @@ trace_pilot run_trace_pilot(const scene_data& scene, const scene_bvh& bvh,
   auto rows = std::vector<std::array<double, 7>>(ny);
   // Per grid row, with params.allocation: the shadow rays cast.
   auto row_shadows = std::vector<std::vector<trace_shadow_record>>(params.allocation ? ny : 0);
-  // Per grid pixel: the variance of one path (mean over channels) and its
-  // rays, for the gain of adaptive sampling.
-  auto pixel_moments = std::vector<std::array<double, 2>>((size_t)nx * ny);
   parallel_chunks(ny, 1, params.threads, [&](int64_t begin, int64_t end) {
     auto points = std::vector<trace_roulette_point>{};
     auto rays   = (int64_t)0;
@@ -857,8 +841,6 @@ trace_pilot run_trace_pilot(const scene_data& scene, const scene_bvh& bvh,
         // their means is the variance of a pixel as the render's numbers
         // stratify it, not as independent ones would.
         glm::dvec3 means[2];
-        auto sum = glm::dvec3{0, 0, 0}, sum_squares = glm::dvec3{0, 0, 0};
-        auto paths = 0.0, pixel_rays = 0.0;
         for (auto set = 0; set < 2; set++) {
           auto seed = hash_uint64(params.seed ^ (0x70696c6f74ULL + (uint64_t)set));  // "pilot"
           auto set_sum = glm::dvec3{0, 0, 0};
@@ -868,13 +850,9 @@ trace_pilot run_trace_pilot(const scene_data& scene, const scene_bvh& bvh,
             auto ray = sample_camera_ray(camera, i, j, size.x, size.y, sequence);
             if (!is_traceable_ray(ray)) continue;
             points.clear();
-            auto radiance = trace_path(walk, ray, sequence);
+            auto radiance = trace_path(walk, ray, sequence, 1);
             if (!isfinite(radiance)) continue;
             set_sum += glm::dvec3(radiance);
-            sum += glm::dvec3(radiance);
-            sum_squares += glm::dvec3(radiance) * glm::dvec3(radiance);
-            paths += 1;
-            pixel_rays += (double)rays;
             sums[2] += (double)rays;
             sums[3] += 1;
             for (auto& point : points) {
@@ -891,12 +869,6 @@ trace_pilot run_trace_pilot(const scene_data& scene, const scene_bvh& bvh,
           }
           means[set] = set_sum / (double)pilot_samples;
         }
-        if (paths > 1) {
-          auto variance = (sum_squares - sum * sum / paths) / (paths - 1);
-          pixel_moments[(size_t)row * nx + column] = {
-              std::max((variance.x + variance.y + variance.z) / 3, 0.0),
-              std::max(pixel_rays / paths, 1.0)};
-        }
         auto difference = means[0] - means[1];
         sums[0] += glm::dot(difference, difference) / 3;
         sums[1] += 1;
@@ -908,15 +880,6 @@ trace_pilot run_trace_pilot(const scene_data& scene, const scene_bvh& bvh,
   for (auto& sums : rows)
     for (auto k = 0; k < 7; k++) totals[k] += sums[k];
   auto pilot_result = trace_pilot{};
-  // mean(v) mean(c) / mean(sqrt(v c))^2, in the grid's order.
-  auto variances = 0.0, costs = 0.0, deviations = 0.0;
-  for (auto& [variance, cost] : pixel_moments) {
-    variances += variance;
-    costs += cost;
-    deviations += std::sqrt(variance * cost);
-  }
-  auto gain = deviations > 0 ? variances * costs / (deviations * deviations) : 1.0;
-  pilot_result.adaptive_gain = std::isfinite(gain) ? (float)gain : 1.0f;
   if (!(totals[1] > 0 && totals[3] > 0 && totals[6] > 0)) return pilot_result;
   // Var(mean A - mean B) = 2 V / n for V the variance of one sample.
   auto pixel_variance = pilot_samples * totals[0] / totals[1] / 2;
@@ -937,70 +900,39 @@ float estimate_roulette_threshold(const scene_data& scene, const scene_bvh& bvh,
   return run_trace_pilot(scene, bvh, context, params).roulette_threshold;
 }
 
-// The pilot of adaptive sampling (see the header): 2 paths a pixel, the
-// variance of their mean over channels and their rays, averaged over a
-// 7 x 7 box; then the rates by bisection on their scale, so that the
-// render's estimated rays stay within those of one path a pixel sample.
-std::vector<float> estimate_sample_rates(const scene_data& scene, const scene_bvh& bvh,
-    const trace_context& context, const trace_params& params, float roulette_threshold,
-    const trace_allocation* allocation) {
-  auto  size   = camera_resolution(scene.cameras[params.camera], params.resolution);
-  auto& camera = scene.cameras[params.camera];
-  auto  pixels = (size_t)size.x * size.y;
-  auto  variance = std::vector<double>(pixels), cost = std::vector<double>(pixels);
-  auto  pilot    = params;
-  pilot.split    = 1;
-  auto seed = hash_uint64(params.seed ^ 0x7261746573ULL);  // "rates"
-  parallel_chunks(size.y, 1, params.threads, [&](int64_t begin, int64_t end) {
-    auto rays = (int64_t)0;
-    auto walk = trace_walk{
-        scene, bvh, context, pilot, roulette_threshold, rays, nullptr, nullptr, nullptr, allocation};
-    for (auto j = (int)begin; j < (int)end; j++) {
-      for (auto i = 0; i < size.x; i++) {
-        auto pixel    = (int64_t)j * size.x + i;
-        auto values   = std::array<vec3f, 2>{};
-        rays          = 0;
-        for (auto s = 0; s < 2; s++) {
-          auto sequence = make_pixel_sequence(context, pilot, seed, pixel, (uint32_t)s);
-          auto ray = sample_camera_ray(camera, i, j, size.x, size.y, sequence);
-          if (!is_traceable_ray(ray)) continue;
-          auto radiance = trace_path(walk, ray, sequence);
-          if (isfinite(radiance)) values[s] = radiance;
-        }
-        auto difference  = glm::dvec3(values[0] - values[1]);
-        variance[pixel]  = glm::dot(difference, difference) / 6;  // (a - b)^2 / 2, 3 channels
-        cost[pixel]      = std::max((double)rays / 2, 1.0);
-      }
+// Box averages over (2 radius + 1)^2 pixels, rows then columns (the same
+// sums whatever the threads).
+static void box_average(std::vector<double>& values, vec2i size, int radius) {
+  auto row = std::vector<double>(values.size());
+  for (auto j = 0; j < size.y; j++) {
+    for (auto i = 0; i < size.x; i++) {
+      auto sum = 0.0;
+      auto lo = std::max(i - radius, 0), hi = std::min(i + radius, size.x - 1);
+      for (auto k = lo; k <= hi; k++) sum += values[(size_t)j * size.x + k];
+      row[(size_t)j * size.x + i] = sum / (hi - lo + 1);
     }
-  });
-  // Box averages, rows then columns (the same sums whatever the threads).
-  auto box = [&](std::vector<double>& values) {
-    auto radius = 3;
-    auto row    = std::vector<double>(pixels);
-    for (auto j = 0; j < size.y; j++) {
-      for (auto i = 0; i < size.x; i++) {
-        auto sum = 0.0;
-        auto lo = std::max(i - radius, 0), hi = std::min(i + radius, size.x - 1);
-        for (auto k = lo; k <= hi; k++) sum += values[(size_t)j * size.x + k];
-        row[(size_t)j * size.x + i] = sum / (hi - lo + 1);
-      }
+  }
+  for (auto j = 0; j < size.y; j++) {
+    auto lo = std::max(j - radius, 0), hi = std::min(j + radius, size.y - 1);
+    for (auto i = 0; i < size.x; i++) {
+      auto sum = 0.0;
+      for (auto k = lo; k <= hi; k++) sum += row[(size_t)k * size.x + i];
+      values[(size_t)j * size.x + i] = sum / (hi - lo + 1);
     }
-    for (auto j = 0; j < size.y; j++) {
-      auto lo = std::max(j - radius, 0), hi = std::min(j + radius, size.y - 1);
-      for (auto i = 0; i < size.x; i++) {
-        auto sum = 0.0;
-        for (auto k = lo; k <= hi; k++) sum += row[(size_t)k * size.x + i];
-        values[(size_t)j * size.x + i] = sum / (hi - lo + 1);
-      }
-    }
-  };
-  box(variance);
-  box(cost);
+  }
+}
+
+// Paths a sample per pixel, in proportion to sqrt(variance / cost) and
+// scaled so that the pixels' costs add up to those of one path a sample each
+// (see estimate_sample_rates for the rounding).
+static std::vector<float> allocate_sample_rates(
+    const std::vector<double>& variance, const std::vector<double>& cost, int samples) {
+  auto pixels = variance.size();
   // Fewer paths than one a sample: one every q samples, q a power of two
   // that divides the sample count (up to 8), so that the render takes whole
   // paths in every pixel.
   auto max_every = 1;
-  while (max_every < 8 && params.samples % (max_every * 2) == 0) max_every *= 2;
+  while (max_every < 8 && samples % (max_every * 2) == 0) max_every *= 2;
   auto quantize = [&](double rate) -> float {
     if (rate >= 1) return (float)std::min((double)adaptive_max_paths, std::round(rate));
     auto every = 1;
@@ -1035,6 +967,91 @@ std::vector<float> estimate_sample_rates(const scene_data& scene, const scene_bv
   return rates;
 }
 
+// The per-pixel plan (see the header): 2 camera samples a pixel, each hit
+// continued by 2 paths, with numbers of their own; per pixel, the variance
+// between the two paths of a hit (the tail's, V_tail), the variance of a
+// hit's mean, V_hit + V_tail / 2, and the tail's rays, each averaged over
+// 7 x 7 pixels. Then per pixel the split and the rates.
+trace_pixel_plan estimate_pixel_plan(const scene_data& scene, const scene_bvh& bvh,
+    const trace_context& context, const trace_params& params, float roulette_threshold,
+    const trace_allocation* allocation) {
+  auto  size   = camera_resolution(scene.cameras[params.camera], params.resolution);
+  auto& camera = scene.cameras[params.camera];
+  auto  pixels = (size_t)size.x * size.y;
+  auto  tail_variance = std::vector<double>(pixels), mean_variance = std::vector<double>(pixels);
+  auto  tail_cost     = std::vector<double>(pixels);
+  auto  seed = hash_uint64(params.seed ^ 0x7261746573ULL);  // "rates"
+  parallel_chunks(size.y, 1, params.threads, [&](int64_t begin, int64_t end) {
+    auto rays = (int64_t)0;
+    auto walk = trace_walk{
+        scene, bvh, context, params, roulette_threshold, rays, nullptr, nullptr, nullptr, allocation};
+    for (auto j = (int)begin; j < (int)end; j++) {
+      for (auto i = 0; i < size.x; i++) {
+        auto pixel  = (int64_t)j * size.x + i;
+        auto means  = std::array<vec3f, 2>{};
+        auto within = 0.0, camera_rays = 0.0;
+        rays = 0;
+        for (auto s = 0; s < 2; s++) {
+          auto sequence = make_pixel_sequence(context, params, seed, pixel, (uint32_t)s);
+          auto ray = sample_camera_ray(camera, i, j, size.x, size.y, sequence);
+          if (!is_traceable_ray(ray)) continue;
+          auto tails    = std::array<vec3f, 2>{};
+          auto radiance = trace_path(walk, ray, sequence, 2, nullptr, tails.data());
+          camera_rays += 1;
+          if (!isfinite(radiance)) continue;
+          means[s]        = radiance;
+          auto difference = glm::dvec3(tails[0] - tails[1]);
+          within += glm::dot(difference, difference) / 6;  // (a - b)^2 / 2, 3 channels
+        }
+        auto difference      = glm::dvec3(means[0] - means[1]);
+        tail_variance[pixel] = within / 2;
+        mean_variance[pixel] = glm::dot(difference, difference) / 6;
+        tail_cost[pixel]     = std::max(((double)rays - camera_rays) / 4, 0.0);
+      }
+    }
+  });
+  box_average(tail_variance, size, 3);
+  box_average(mean_variance, size, 3);
+  box_average(tail_cost, size, 3);
+  // Per pixel, a sample is a camera ray and its hit (one ray) continued by
+  // k paths of c_tail rays each: its variance is V_hit + V_tail / k and
+  // its cost 1 + k c_tail. The k that minimises their product is the
+  // classic optimum of splitting (EARS's factor at the first vertex, from
+  // the pixel's own statistics), searched over the integers 1 ... 8.
+  // The buffers then hold each pixel's variance and cost at that split.
+  auto plan = trace_pixel_plan{};
+  plan.splits.assign(pixels, 1);
+  auto& variance = tail_variance;
+  auto& cost     = tail_cost;
+  for (size_t i = 0; i < pixels; i++) {
+    auto tail = tail_variance[i], hit = std::max(mean_variance[i] - tail / 2, 0.0);
+    auto best = std::max(params.split, 1);
+    if (params.split == 0) {
+      auto best_product = std::numeric_limits<double>::max();
+      for (auto split = 1; split <= trace_max_split; split++) {
+        auto product = (hit + tail / split) * (1 + split * tail_cost[i]);
+        if (product < best_product * (1 - 1e-9)) best = split, best_product = product;
+      }
+    }
+    plan.splits[i] = (uint8_t)std::min(best, 255);
+    variance[i]    = hit + tail / best;
+    cost[i]        = 1 + best * tail_cost[i];
+  }
+  mean_variance = {};
+  // The gain in efficiency the rates promise if variances fell as 1 /
+  // samples: mean(v) mean(c) / mean(sqrt(v c))^2.
+  auto variances = 0.0, costs = 0.0, deviations = 0.0;
+  for (size_t i = 0; i < pixels; i++) {
+    variances += variance[i];
+    costs += cost[i];
+    deviations += std::sqrt(variance[i] * cost[i]);
+  }
+  auto gain = deviations > 0 ? variances * costs / (deviations * deviations) : 1.0;
+  plan.gain = std::isfinite(gain) ? (float)gain : 1.0f;
+  plan.rates = allocate_sample_rates(variance, cost, params.samples);
+  return plan;
+}
+
 // A pixel's adaptive rate (trace_state::rates) as m paths every sample or
 // one path every q samples; {1, 1} without rates.
 struct trace_pixel_paths {
@@ -1053,15 +1070,12 @@ static bool trace_rows(trace_state& state, const scene_data& scene, const scene_
     const trace_context& context, const trace_params& params, int count,
     std::vector<std::vector<trace_ray>>* records, const std::atomic<bool>* cancel = nullptr) {
   auto& camera     = scene.cameras[params.camera];
-  // The paths take the render's split (params.split may leave it open).
-  auto split_params  = params;
-  split_params.split = std::max(state.split, 1);
   auto  render_row = [&](int j) {
     auto rays = (int64_t)0, nonfinite = (int64_t)0, clamped = (int64_t)0;
     auto energy = 0.0, clamped_energy = 0.0;
     auto record = records ? &(*records)[j] : nullptr;
     auto tally  = trace_tally{};
-    auto walk   = trace_walk{scene, bvh, context, split_params, state.roulette_threshold, rays,
+    auto walk   = trace_walk{scene, bvh, context, params, state.roulette_threshold, rays,
         record, nullptr, nullptr, state.allocation.cells.x > 0 ? &state.allocation : nullptr,
         &tally};
     for (auto i = 0; i < state.width; i++) {
@@ -1072,6 +1086,7 @@ static bool trace_rows(trace_state& state, const scene_data& scene, const scene_
       // weighing 1 / m, or one path every q samples (numbers s / q) weighing
       // q; the paths of any range of samples are a pure function of it.
       auto [paths, every] = get_pixel_paths(state, pixel);
+      auto split = state.splits.empty() ? state.split : (int)state.splits[pixel];
       auto path_weight    = (float)every / (float)paths;
       for (auto n = (int64_t)next * paths; n < (int64_t)(next + count) * paths; n++) {
         if (n % every != 0) continue;
@@ -1085,7 +1100,9 @@ static bool trace_rows(trace_state& state, const scene_data& scene, const scene_
           continue;
         }
         auto aov      = trace_aov_sample{};
-        auto radiance = trace_path(walk, ray, sequence, params.aovs ? &aov : nullptr);
+        auto radiance = trace_path(walk, ray, sequence, split, params.aovs ? &aov : nullptr);
+        tally.paths++;
+        tally.continuations += split;
         // The AOVs of the camera's hit count even if the path's radiance is
         // dropped (its lobes do not).
         auto add_aovs = [&](float lobe_scale) {
@@ -1135,6 +1152,8 @@ static bool trace_rows(trace_state& state, const scene_data& scene, const scene_
     state.vertices += tally.vertices;
     state.light_samples += tally.light_samples;
     state.shadow_rays += tally.shadow_rays;
+    state.paths += tally.paths;
+    state.continuations += tally.continuations;
     state.nonfinite += nonfinite;
     state.clamped += clamped;
     state.row_energy[j] += energy;
@@ -1155,33 +1174,27 @@ static bool trace_rows(trace_state& state, const scene_data& scene, const scene_
   return true;
 }
 
-// The render's roulette threshold: the parameter's, or the pilot's (once).
-// And the adaptive rates (once, after the threshold their pilot uses).
+// The render's roulette threshold: the parameter's, or the pilot's (once),
+// which also gives the shadow rays' allocation. Then the per-pixel plan
+// (once, with the threshold and allocation the render uses), unless
+// adaptive sampling is off.
 static void init_roulette_threshold(trace_state& state, const scene_data& scene,
     const scene_bvh& bvh, const trace_context& context, const trace_params& params) {
   if (state.roulette_threshold > 0) return;
-  // The pilot when the threshold or the choice of adaptive sampling needs it
-  // (a render of more samples than the automatic choice allows needs no gain).
-  // (And where the shadow rays' allocation needs it.)
   auto pilot  = trace_pilot{};
   auto lights = paths_sample_lights(params, context);
-  if (params.roulette_threshold <= 0 ||
-      (params.adaptive == trace_adaptive_type::automatic && may_use_adaptive_sampling(params)) ||
-      (params.allocation && lights)) {
-    pilot               = run_trace_pilot(scene, bvh, context, params);
-    state.adaptive_gain = pilot.adaptive_gain;
-  }
+  if (params.roulette_threshold <= 0 || (params.allocation && lights))
+    pilot = run_trace_pilot(scene, bvh, context, params);
   state.roulette_threshold = params.roulette_threshold > 0 ? params.roulette_threshold
                                                            : pilot.roulette_threshold;
   state.allocation = pilot.allocation;
   auto allocation  = state.allocation.cells.x > 0 ? &state.allocation : nullptr;
-  // The split and its adaptive sampling where no light with area is
-  // sampled (a constant sky, distant lights).
-  auto area_lights = lights && context.mis_lights;
-  if (use_adaptive_sampling(params, pilot.adaptive_gain, area_lights))
-    state.rates = estimate_sample_rates(
-        scene, bvh, context, params, state.roulette_threshold, allocation);
-  state.split = choose_path_split(params, !state.rates.empty(), area_lights);
+  state.split      = std::max(params.split, 1);
+  if (params.adaptive == trace_adaptive_type::off) return;
+  auto plan = estimate_pixel_plan(scene, bvh, context, params, state.roulette_threshold, allocation);
+  state.rates         = std::move(plan.rates);
+  state.splits        = std::move(plan.splits);
+  state.adaptive_gain = plan.gain;
 }
 
 bool trace_samples(trace_state& state, const scene_data& scene, const scene_bvh& bvh,

@@ -22,10 +22,10 @@
 // the probability that maximises efficiency (see trace_allocation). Where no
 // MIS weight needs a BSDF pdf (no light with area to sample: a constant sky,
 // distant lights), a sampled hair direction takes its lobe's own weight
-// A_p / P(p), and the lobes are not evaluated. With adaptive sampling (params.adaptive; by
-// default where the first pilot predicts that it pays), a second pilot gives
-// each pixel more or fewer paths a sample by its variance and cost (see
-// estimate_sample_rates), a pure function of the same inputs.
+// A_p / P(p), and the lobes are not evaluated. A second pilot plans each
+// pixel's samples from its own statistics (see estimate_pixel_plan): how many
+// paths share a camera ray's hit, and how many paths a sample the pixel
+// takes; a pure function of the same inputs.
 //
 
 #ifndef YOCTO_TRACE_H_
@@ -54,8 +54,8 @@ inline const auto trace_sampler_names = std::array<std::string, 2>{"path", "naiv
 enum struct trace_lights_type { automatic, all };
 inline const auto trace_lights_names = std::array<std::string, 2>{"automatic", "all"};
 
-// Adaptive sampling: `automatic` turns it on where the roulette's pilot
-// predicts that it pays (see use_adaptive_sampling), `on` and `off` always.
+// Adaptive sampling: `automatic` and `on` plan every pixel's samples (see
+// estimate_pixel_plan), `off` gives every pixel one path a sample.
 enum struct trace_adaptive_type { automatic, on, off };
 inline const auto trace_adaptive_names = std::array<std::string, 3>{"auto", "on", "off"};
 
@@ -73,11 +73,12 @@ struct trace_params {
   // render's own, estimated by a pilot (estimate_roulette_threshold).
   float              roulette_threshold = 0;
   // Paths per camera ray, sharing its hit (splitting at the first vertex);
-  // 0 for the render's own choice (see choose_path_split).
+  // 0 for each pixel's own (see estimate_pixel_plan; 1 without adaptive
+  // sampling).
   int                split      = 0;
-  // Adaptive sampling: a pilot measures each pixel's variance and cost, and
+  // Adaptive sampling: a pilot measures each pixel's variances and cost, and
   // the pixel takes that many more or fewer paths per sample (see
-  // estimate_sample_rates); off: every pixel one path per sample.
+  // estimate_pixel_plan); off: every pixel one path per sample.
   trace_adaptive_type adaptive  = trace_adaptive_type::automatic;
   // Sky samples that would add less than this times the sky's average
   // radiance play a roulette for their shadow ray (0 for none).
@@ -183,9 +184,10 @@ struct trace_state {
   std::vector<double>        row_energy     = {};
   std::vector<double>        row_clamped    = {};
   float                      roulette_threshold = 0;  // the render's, 0 until set
-  // The pilot's predicted gain of adaptive sampling (0 if no pilot ran).
+  // The plan's predicted gain of its rates (0 if no plan).
   float                      adaptive_gain = 0;
-  // Paths per camera ray: params.split or the render's choice (0 until set).
+  // Paths per camera ray without per-pixel splits: max(params.split, 1) (0
+  // until set).
   int                        split = 0;
   // The shadow rays' allocation (params.allocation; no cells until set).
   trace_allocation           allocation = {};
@@ -194,10 +196,16 @@ struct trace_state {
   std::atomic<int64_t>       vertices      = 0;
   std::atomic<int64_t>       light_samples = 0;
   std::atomic<int64_t>       shadow_rays   = 0;
+  // Camera paths traced, and the paths that continued them (with the split).
+  std::atomic<int64_t>       paths         = 0;
+  std::atomic<int64_t>       continuations = 0;
   // Paths per sample of each pixel with adaptive sampling (empty until set,
   // and without it): an integer m >= 1 (m paths, each weighing 1 / m), or 1 / q
   // for q a power of two (one path every q samples, weighing q).
   std::vector<float>         rates   = {};
+  // Paths per camera ray of each pixel with adaptive sampling (empty
+  // without: every pixel takes `split`).
+  std::vector<uint8_t>       splits  = {};
 };
 
 // The fraction of the samples' energy that clamping removed so far.
@@ -221,57 +229,39 @@ double trace_image_bytes(const scene_data& scene, const trace_params& params);
 float estimate_roulette_threshold(const scene_data& scene, const scene_bvh& bvh,
     const trace_context& context, const trace_params& params);
 
-// What the roulette's pilot measures: the threshold above, and the gain in
-// efficiency that allocating samples to pixels by their standard deviation
-// over the square root of their cost would give if the variance of a pixel
-// fell as 1 / samples: mean(v) mean(c) / mean(sqrt(v c))^2 over the pilot's
-// pixels, v the variance of one path (of its 16) and c its rays.
+// What the roulette's pilot measures: the threshold above and, with
+// params.allocation, the shadow rays' allocation.
 struct trace_pilot {
   float            roulette_threshold = 1;
-  float            adaptive_gain      = 1;
   trace_allocation allocation         = {};  // with params.allocation
 };
 trace_pilot run_trace_pilot(const scene_data& scene, const scene_bvh& bvh,
     const trace_context& context, const trace_params& params);
 
-// Whether a render samples adaptively: `on`, never `off`; `automatic` where
-// the pilot predicts a gain of at least 1.7 (1.4 where the automatic split
-// comes with it: no light with area sampled, params.split not 1) and the render takes
-// at most 64 samples. The limits are measured (docs/RESULTS.md): below 1.7
-// (the curly head, 1.3-1.6: even noise) adaptive sampling alone gains
-// nothing; with the split it gained 8.5% on the blond ball (gain 1.49,
-// where either alone gains nothing); at 256 samples it lost 6% on the fur
-// ball and 12% on the hair locks (gains of 4-5 that Sobol's stratification of
-// their fibre edges takes away: the pilot's independent paths do not see
-// it); at 16 and 64 it gained up to 37%.
-bool use_adaptive_sampling(
-    const trace_params& params, float adaptive_gain, bool area_lights = true);
-
-// Paths per camera ray: params.split if set; else 2 where the render samples
-// adaptively and samples no light with area (a constant sky, with or
-// without distant lights), 1 elsewhere. Measured
-// (docs/RESULTS.md): adaptive sampling gives the pixels whose error is in the
-// paths after the first hit more samples, whose stratified camera numbers
-// leave little of that error to the camera, so a second path per camera ray
-// gains 15-22% in efficiency on the hair balls and the fur ball, while
-// without adaptive sampling it loses 10-15% there; where lights are sampled,
-// it lost 17% on the hair locks (every path repeats the light sample; 9%
-// with the shadow rays' allocation, where straight hair gains 8%). Under a
-// sun, whose shadow rays the allocation thins, it gains 35% on the peers'
-// straight ball (1.31 -> 1.77x the best peer at 256², 64 spp).
-int choose_path_split(const trace_params& params, bool adaptive, bool area_lights);
-
-// Paths per sample of every pixel for adaptive sampling, proportional to the
-// pixel's standard deviation over the square root of its cost (the
-// allocation that minimises the image's mean squared error for a given
-// cost), scaled so that the render costs what it would cost without, and
-// rounded to integers from 1 to 16 or to 1 / q for q = 2, 4, 8 dividing
-// params.samples (so that every pixel takes a whole number of paths). The
-// variances and costs come from a pilot of 2 paths a pixel with numbers of
-// their own (the image stays unbiased: no path of the pilot is in it),
-// averaged over 7 x 7 pixels. A pure function of the scene, the parameters,
-// the threshold and the seed, as the roulette's pilot.
-std::vector<float> estimate_sample_rates(const scene_data& scene, const scene_bvh& bvh,
+// The per-pixel plan of adaptive sampling. A pilot traces 2 camera samples
+// a pixel, each hit continued by 2 paths, with numbers of their own (the
+// image stays unbiased: no path of the pilot is in it), and measures per
+// pixel, averaged over 7 x 7 pixels: the variance between the paths of one
+// hit (the tail's, V_tail), the variance of the camera's hit (V_hit, from the
+// spread of the two hits' means) and the tail's rays c. A sample of the pixel
+// then costs 1 + k c rays for k paths per camera ray and has variance
+// V_hit + V_tail / k; the split k (1 ... 8, or params.split) minimises their
+// product, the optimum of splitting at the first vertex (as EARS, Rath et
+// al. 2022, from the pixel's own statistics). The rates are in proportion to
+// the pixel's standard deviation over the square root of its cost (the
+// allocation that minimises the image's mean squared error for its cost),
+// scaled so that the render costs params.samples samples a pixel at each
+// pixel's split, and rounded to integers from 1 to 16 or to 1 / q for q =
+// 2, 4, 8 dividing params.samples (so that every pixel takes whole paths).
+// gain: the rates' predicted gain in efficiency, mean(v) mean(c) /
+// mean(sqrt(v c))^2. A pure function of the scene, the parameters, the
+// threshold and the seed, as the roulette's pilot.
+struct trace_pixel_plan {
+  std::vector<float>   rates  = {};
+  std::vector<uint8_t> splits = {};
+  float                gain   = 1;
+};
+trace_pixel_plan estimate_pixel_plan(const scene_data& scene, const scene_bvh& bvh,
     const trace_context& context, const trace_params& params, float roulette_threshold,
     const trace_allocation* allocation = nullptr);
 

@@ -58,7 +58,6 @@ VARIANTS = [
     ("after-split-1", "after", ["--split", "1"]),
     ("after-split-2", "after", ["--split", "2"]),
     ("after-no-adaptive", "after", ["--no-adaptive"]),
-    ("after-adaptive", "after", ["--adaptive"]),
     ("after-sobol-pairs", "after", ["--sequence", "sobol"]),
     ("after-demux", "after", ["--hair-demux"]),
     ("after-demux-independent", "after", ["--hair-demux", "--sequence", "independent"]),
@@ -77,11 +76,10 @@ LEVERS = [
     ("light choice: constant sky to BSDF sampling, MIS compensation", "after-lights-all"),
     ("bent curves in exact pieces", "after-whole-curves"),
     ("shadow-ray roulette", "after-shadow-0"),
-    ("2 paths per camera ray with adaptive sampling and no light sampled (against 1)",
+    ("each pixel's own split (against 1 path per camera ray, the rates still planned)",
      "after-split-1"),
-    ("the split's choice (against 2 paths per camera ray always)", "after-split-2"),
-    ("adaptive sampling where the pilot predicts a gain (against none)", "after-no-adaptive"),
-    ("the pilot's choice (against adaptive sampling always)", "after-adaptive"),
+    ("each pixel's own split (against 2 paths per camera ray everywhere)", "after-split-2"),
+    ("the per-pixel plan, rates and splits (against uniform sampling)", "after-no-adaptive"),
 ]
 CHECKPOINTS = [16, 64, 256]
 
