@@ -922,11 +922,19 @@ static void box_average(std::vector<double>& values, vec2i size, int radius) {
   }
 }
 
-// Paths a sample per pixel, in proportion to sqrt(variance / cost) and
-// scaled so that the pixels' costs add up to those of one path a sample each
-// (see estimate_sample_rates for the rounding).
-static std::vector<float> allocate_sample_rates(
-    const std::vector<double>& variance, const std::vector<double>& cost, int samples) {
+// Paths a sample per pixel (see estimate_pixel_plan). A pixel's camera hit
+// is a 2D integrand with edges (fibres against the sky), whose variance
+// under Owen-scrambled nets falls as n^-1.5 (Owen 1997), the paths after
+// it as n^-1: its MSE after n camera samples is a n^-1.5 + b n^-1, a =
+// V_hit, b = V_tail / k (variance - hit), for n c rays. Minimising the
+// image's sum for a budget gives 1.5 a n^-2.5 + b n^-2 = lambda c in every
+// pixel (solved by Newton's method on log n, whose slope stays in [-2.5,
+// -2]), lambda the smallest whose rounded rates cost no more than one
+// sample a pixel at each pixel's cost (bisection on log lambda). With a = 0
+// it is the allocation in proportion to sqrt(b / c).
+static std::vector<float> allocate_stratified_rates(const std::vector<double>& hit,
+    const std::vector<double>& variance, const std::vector<double>& cost, int samples,
+    int threads) {
   auto pixels = variance.size();
   // Fewer paths than one a sample: one every q samples, q a power of two
   // that divides the sample count (up to 8), so that the render takes whole
@@ -939,31 +947,61 @@ static std::vector<float> allocate_sample_rates(
     while (every < max_every && rate * every * std::sqrt(2.0) < 1) every *= 2;
     return 1.0f / (float)every;
   };
-  auto weights = std::vector<double>(pixels);
-  auto budget  = 0.0, total = 0.0;
+  auto budget = 0.0;
+  for (size_t i = 0; i < pixels; i++) budget += cost[i];
+  // With u = n^-1/2 the condition is 1.5 a u^5 + b u^4 = lambda c, convex
+  // and increasing in u: Newton's method from the smaller of the roots of
+  // either term alone (where the sum is between lambda c and twice it)
+  // converges from above. Per pixel, those roots are (c / 1.5 a)^(1/5)
+  // lambda^(1/5) and (c / b)^(1/4) lambda^(1/4).
+  auto roots = std::vector<std::array<double, 2>>(pixels);
   for (size_t i = 0; i < pixels; i++) {
-    weights[i] = std::sqrt(variance[i] / cost[i]);
-    budget += cost[i];
-    total += weights[i] * cost[i];
+    auto a = 1.5 * hit[i], b = std::max(variance[i] - hit[i], 0.0);
+    roots[i] = {a > 0 ? std::pow(cost[i] / a, 0.2) : flt_max,
+        b > 0 ? std::sqrt(std::sqrt(cost[i] / b)) : flt_max};
   }
-  // No variance anywhere: every pixel's first path is its value.
-  if (total == 0) return std::vector<float>(pixels, 1.0f / (float)max_every);
-  auto rates = std::vector<float>(pixels, 1.0f);
-  if (!std::isfinite(total)) return rates;
-  auto spent = [&](double scale) {
-    auto sum = 0.0;
-    for (size_t i = 0; i < pixels; i++) sum += quantize(scale * weights[i]) * cost[i];
-    return sum;
+  auto camera_samples = [&](size_t i, double lambda, double lambda5, double lambda4) {
+    auto a = 1.5 * hit[i], b = std::max(variance[i] - hit[i], 0.0);
+    if (!(a > 0 || b > 0)) return 0.0;
+    auto target = lambda * cost[i];
+    auto u      = std::min(roots[i][0] * lambda5, roots[i][1] * lambda4);
+    for (auto iteration = 0; iteration < 5; iteration++) {
+      auto u3 = u * u * u;
+      u -= (u3 * u * (a * u + b) - target) / (u3 * (5 * a * u + 4 * b));
+    }
+    return u > 0 ? 1 / (u * u) : 0.0;
   };
-  // The largest scale whose rounded rates cost no more than the budget.
-  auto low = 0.0, high = 4 * budget / total;
-  while (spent(high) <= budget && high < 1e30) low = high, high *= 2;
-  for (auto iteration = 0; iteration < 40; iteration++) {
-    auto middle = (low + high) / 2;
-    if (spent(middle) <= budget) low = middle;
-    else high = middle;
+  auto rows = (int64_t)std::min(pixels, (size_t)1024);
+  auto row_sums = std::vector<double>(rows);
+  auto rates_at = [&](double lambda, bool store, std::vector<float>& rates) {
+    auto lambda5 = std::pow(lambda, 0.2), lambda4 = std::sqrt(std::sqrt(lambda));
+    parallel_chunks(rows, 1, threads, [&](int64_t begin, int64_t end) {
+      for (auto row = begin; row < end; row++) {
+        auto sum = 0.0;
+        auto first = pixels * (size_t)row / (size_t)rows;
+        auto last  = pixels * (size_t)(row + 1) / (size_t)rows;
+        for (auto i = first; i < last; i++) {
+          auto rate = quantize(camera_samples(i, lambda, lambda5, lambda4) / samples);
+          if (store) rates[i] = rate;
+          sum += rate * cost[i];
+        }
+        row_sums[row] = sum;
+      }
+    });
+    auto spent = 0.0;
+    for (auto sum : row_sums) spent += sum;  // in row order: the same whatever the threads
+    return spent;
+  };
+  auto rates = std::vector<float>(pixels, 1.0f);
+  // The smallest lambda whose rounded rates cost no more than the budget.
+  auto low = 1e-30, high = 1e30;
+  if (!(rates_at(high, false, rates) <= budget)) return rates;
+  for (auto iteration = 0; iteration < 60; iteration++) {
+    auto middle = std::sqrt(low * high);
+    if (rates_at(middle, false, rates) <= budget) high = middle;
+    else low = middle;
   }
-  for (size_t i = 0; i < pixels; i++) rates[i] = quantize(low * weights[i]);
+  rates_at(high, true, rates);
   return rates;
 }
 
@@ -1036,8 +1074,8 @@ trace_pixel_plan estimate_pixel_plan(const scene_data& scene, const scene_bvh& b
     plan.splits[i] = (uint8_t)std::min(best, 255);
     variance[i]    = hit + tail / best;
     cost[i]        = 1 + best * tail_cost[i];
+    mean_variance[i] = hit;
   }
-  mean_variance = {};
   // The gain in efficiency the rates promise if variances fell as 1 /
   // samples: mean(v) mean(c) / mean(sqrt(v c))^2.
   auto variances = 0.0, costs = 0.0, deviations = 0.0;
@@ -1048,7 +1086,9 @@ trace_pixel_plan estimate_pixel_plan(const scene_data& scene, const scene_bvh& b
   }
   auto gain = deviations > 0 ? variances * costs / (deviations * deviations) : 1.0;
   plan.gain = std::isfinite(gain) ? (float)gain : 1.0f;
-  plan.rates = allocate_sample_rates(variance, cost, params.samples);
+  plan.rates    = allocate_stratified_rates(
+      mean_variance, variance, cost, params.samples, params.threads);
+  mean_variance = {};
   return plan;
 }
 

@@ -247,12 +247,14 @@ trace_pilot run_trace_pilot(const scene_data& scene, const scene_bvh& bvh,
 // then costs 1 + k c rays for k paths per camera ray and has variance
 // V_hit + V_tail / k; the split k (1 ... 8, or params.split) minimises their
 // product, the optimum of splitting at the first vertex (as EARS, Rath et
-// al. 2022, from the pixel's own statistics). The rates are in proportion to
-// the pixel's standard deviation over the square root of its cost (the
-// allocation that minimises the image's mean squared error for its cost),
-// scaled so that the render costs params.samples samples a pixel at each
-// pixel's split, and rounded to integers from 1 to 16 or to 1 / q for q =
-// 2, 4, 8 dividing params.samples (so that every pixel takes whole paths).
+// al. 2022, from the pixel's own statistics). The rates minimise the
+// image's mean squared error for the cost of params.samples samples a pixel
+// at each pixel's split, with the camera hit's part of a pixel's error
+// falling as n^-1.5 (Owen-scrambled nets on a 2D integrand with edges) and
+// the rest as n^-1 (so that fibre edges against the sky, which the pilot's
+// unstratified pairs see as noisy, are not oversampled at high counts), and
+// are rounded to integers from 1 to 16 or to 1 / q for q = 2, 4, 8 dividing
+// params.samples (so that every pixel takes whole paths).
 // gain: the rates' predicted gain in efficiency, mean(v) mean(c) /
 // mean(sqrt(v c))^2. A pure function of the scene, the parameters, the
 // threshold and the seed, as the roulette's pilot.

@@ -276,6 +276,8 @@ def write_report(args, rows, checks, hashes):
               "(above 1: the lever pays).", "",
               "| lever | " + " | ".join(scenes) + " |", "|---|" + "---:|" * len(scenes)]
     for label, variant in LEVERS:
+        if variant not in args.variants:
+            continue
         lines.append(f"| {label} (`{variant}`) | " +
                      " | ".join(gain(name, "after", variant, 64) for name in scenes) + " |")
     lines += ["", "## The thesis's claim: two Sobol numbers demuxed into four", "",
