@@ -529,8 +529,8 @@ static void scatter_path(const trace_walk& walk, material_point point, ray3f ray
 // The path tracer from a camera ray. With split > 1 the camera ray and its
 // hit are shared by that many paths from the first scattering vertex on,
 // each weighing 1 / split (with `continuations`, split values: what each
-// path brought, for the plan's pilot); path k of sample s draws its numbers as sample
-// s * split + k would, so the split paths of samples first ... end - 1 take
+// path brought, for the plan's pilot); path k of sample s draws its numbers
+// as sample s * split + k would, so the split paths of samples first ... end - 1 take
 // exactly the points first * split ... end * split - 1 of every pair of
 // dimensions past the camera's (stratified together, and any sample range
 // still renders alone).
@@ -928,10 +928,11 @@ static void box_average(std::vector<double>& values, vec2i size, int radius) {
 // it as n^-1: its MSE after n camera samples is a n^-1.5 + b n^-1, a =
 // V_hit, b = V_tail / k (variance - hit), for n c rays. Minimising the
 // image's sum for a budget gives 1.5 a n^-2.5 + b n^-2 = lambda c in every
-// pixel (solved by Newton's method on log n, whose slope stays in [-2.5,
-// -2]), lambda the smallest whose rounded rates cost no more than one
-// sample a pixel at each pixel's cost (bisection on log lambda). With a = 0
-// it is the allocation in proportion to sqrt(b / c).
+// pixel (solved for n by Newton's method, below), lambda the smallest whose
+// rounded rates cost no more than one sample a pixel at each pixel's cost
+// (bisection on log lambda). With a = 0 it is the allocation in proportion
+// to sqrt(b / c). Variances that are not finite give every pixel a path a
+// sample.
 static std::vector<float> allocate_stratified_rates(const std::vector<double>& hit,
     const std::vector<double>& variance, const std::vector<double>& cost, int samples,
     int threads) {
@@ -947,8 +948,12 @@ static std::vector<float> allocate_stratified_rates(const std::vector<double>& h
     while (every < max_every && rate * every * std::sqrt(2.0) < 1) every *= 2;
     return 1.0f / (float)every;
   };
+  auto rates  = std::vector<float>(pixels, 1.0f);
   auto budget = 0.0;
-  for (size_t i = 0; i < pixels; i++) budget += cost[i];
+  for (size_t i = 0; i < pixels; i++) {
+    if (!std::isfinite(hit[i]) || !std::isfinite(variance[i])) return rates;
+    budget += cost[i];
+  }
   // With u = n^-1/2 the condition is 1.5 a u^5 + b u^4 = lambda c, convex
   // and increasing in u: Newton's method from the smaller of the roots of
   // either term alone (where the sum is between lambda c and twice it)
@@ -992,7 +997,6 @@ static std::vector<float> allocate_stratified_rates(const std::vector<double>& h
     for (auto sum : row_sums) spent += sum;  // in row order: the same whatever the threads
     return spent;
   };
-  auto rates = std::vector<float>(pixels, 1.0f);
   // The smallest lambda whose rounded rates cost no more than the budget.
   auto low = 1e-30, high = 1e30;
   if (!(rates_at(high, false, rates) <= budget)) return rates;
@@ -1016,7 +1020,7 @@ trace_pixel_plan estimate_pixel_plan(const scene_data& scene, const scene_bvh& b
   auto  size   = camera_resolution(scene.cameras[params.camera], params.resolution);
   auto& camera = scene.cameras[params.camera];
   auto  pixels = (size_t)size.x * size.y;
-  auto  tail_variance = std::vector<double>(pixels), mean_variance = std::vector<double>(pixels);
+  auto  tail_variance = std::vector<double>(pixels), hit_variance = std::vector<double>(pixels);
   auto  tail_cost     = std::vector<double>(pixels);
   auto  seed = hash_uint64(params.seed ^ 0x7261746573ULL);  // "rates"
   parallel_chunks(size.y, 1, params.threads, [&](int64_t begin, int64_t end) {
@@ -1043,26 +1047,27 @@ trace_pixel_plan estimate_pixel_plan(const scene_data& scene, const scene_bvh& b
         }
         auto difference      = glm::dvec3(means[0] - means[1]);
         tail_variance[pixel] = within / 2;
-        mean_variance[pixel] = glm::dot(difference, difference) / 6;
+        hit_variance[pixel]  = glm::dot(difference, difference) / 6;
         tail_cost[pixel]     = std::max(((double)rays - camera_rays) / 4, 0.0);
       }
     }
   });
   box_average(tail_variance, size, 3);
-  box_average(mean_variance, size, 3);
+  box_average(hit_variance, size, 3);
   box_average(tail_cost, size, 3);
   // Per pixel, a sample is a camera ray and its hit (one ray) continued by
   // k paths of c_tail rays each: its variance is V_hit + V_tail / k and
   // its cost 1 + k c_tail. The k that minimises their product is the
   // classic optimum of splitting (EARS's factor at the first vertex, from
   // the pixel's own statistics), searched over the integers 1 ... 8.
-  // The buffers then hold each pixel's variance and cost at that split.
+  // The buffers then hold each pixel's V_hit, variance and cost at that
+  // split (hit_variance held the variance of a hit's mean until then).
   auto plan = trace_pixel_plan{};
   plan.splits.assign(pixels, 1);
   auto& variance = tail_variance;
   auto& cost     = tail_cost;
   for (size_t i = 0; i < pixels; i++) {
-    auto tail = tail_variance[i], hit = std::max(mean_variance[i] - tail / 2, 0.0);
+    auto tail = tail_variance[i], hit = std::max(hit_variance[i] - tail / 2, 0.0);
     auto best = std::max(params.split, 1);
     if (params.split == 0) {
       auto best_product = std::numeric_limits<double>::max();
@@ -1074,7 +1079,7 @@ trace_pixel_plan estimate_pixel_plan(const scene_data& scene, const scene_bvh& b
     plan.splits[i] = (uint8_t)std::min(best, 255);
     variance[i]    = hit + tail / best;
     cost[i]        = 1 + best * tail_cost[i];
-    mean_variance[i] = hit;
+    hit_variance[i] = hit;
   }
   // The gain in efficiency the rates promise if variances fell as 1 /
   // samples: mean(v) mean(c) / mean(sqrt(v c))^2.
@@ -1086,9 +1091,8 @@ trace_pixel_plan estimate_pixel_plan(const scene_data& scene, const scene_bvh& b
   }
   auto gain = deviations > 0 ? variances * costs / (deviations * deviations) : 1.0;
   plan.gain = std::isfinite(gain) ? (float)gain : 1.0f;
-  plan.rates    = allocate_stratified_rates(
-      mean_variance, variance, cost, params.samples, params.threads);
-  mean_variance = {};
+  plan.rates = allocate_stratified_rates(
+      hit_variance, variance, cost, params.samples, params.threads);
   return plan;
 }
 
