@@ -30,7 +30,6 @@ struct test_render {
   std::vector<float>      rates     = {};           // adaptive rates (empty: uniform)
   int                     split     = 0;            // paths per camera ray
   std::vector<uint8_t>    splits    = {};           // per pixel (empty: split)
-  float                   adaptive_gain = 0;        // the plan's
 };
 
 // Renders samples first ... first + count - 1 (count < 0: params.samples).
@@ -45,7 +44,7 @@ static test_render render_scene(const scene_data& scene, const trace_params& par
   init_trace_state(state, scene, params, first);
   trace_samples(state, scene, bvh, context, params, count < 0 ? params.samples : count);
   return {get_image(state), state.rays.load(), state.nonfinite.load(), state.sums,
-      state.roulette_threshold, state.rates, state.split, state.splits, state.adaptive_gain};
+      state.roulette_threshold, state.rates, state.split, state.splits};
 }
 
 static double image_mean(const texture_data& image) {
@@ -1070,9 +1069,9 @@ TEST(trace, automatic_split_is_each_pixels_own) {
   // The hair scene (32x32, 16 spp), also under a sun and under a textured
   // sky (a light with area, sampled with MIS): with adaptive sampling and
   // an automatic split every pixel has its own split in 1 ... 8, some hair
-  // pixels more than 1, a corner of sky 1; a split that is set is every
-  // pixel's; without adaptive sampling no pixel has its own (split 1 or the
-  // one set).
+  // pixels more than 1, a corner of sky 1; a split that is set is the
+  // render's, no pixel's own, with adaptive sampling or without (split 1
+  // when none is set).
   auto lit    = make_lit_scene();
   auto sky    = make_hair_test_scene();
   sky.textures     = lit.textures;
@@ -1093,7 +1092,8 @@ TEST(trace, automatic_split_is_each_pixels_own) {
     EXPECT_EQ(automatic.splits[0], 1);
     params.split = 3;
     auto set     = render_scene(scene, params);
-    for (auto split : set.splits) EXPECT_EQ(split, 3);
+    EXPECT_TRUE(set.splits.empty());
+    EXPECT_EQ(set.split, 3);
     params.adaptive = trace_adaptive_type::off;
     auto uniform    = render_scene(scene, params);
     EXPECT_TRUE(uniform.splits.empty());

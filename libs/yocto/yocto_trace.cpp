@@ -959,17 +959,18 @@ static std::vector<float> allocate_stratified_rates(const std::vector<double>& h
   // either term alone (where the sum is between lambda c and twice it)
   // converges from above. Per pixel, those roots are (c / 1.5 a)^(1/5)
   // lambda^(1/5) and (c / b)^(1/4) lambda^(1/4).
-  auto roots = std::vector<std::array<double, 2>>(pixels);
+  // Per pixel: 1.5 a, b and the two roots' factors.
+  auto terms = std::vector<std::array<double, 4>>(pixels);
   for (size_t i = 0; i < pixels; i++) {
     auto a = 1.5 * hit[i], b = std::max(variance[i] - hit[i], 0.0);
-    roots[i] = {a > 0 ? std::pow(cost[i] / a, 0.2) : flt_max,
+    terms[i] = {a, b, a > 0 ? std::pow(cost[i] / a, 0.2) : flt_max,
         b > 0 ? std::sqrt(std::sqrt(cost[i] / b)) : flt_max};
   }
   auto camera_samples = [&](size_t i, double lambda, double lambda5, double lambda4) {
-    auto a = 1.5 * hit[i], b = std::max(variance[i] - hit[i], 0.0);
+    auto [a, b, root_a, root_b] = terms[i];
     if (!(a > 0 || b > 0)) return 0.0;
     auto target = lambda * cost[i];
-    auto u      = std::min(roots[i][0] * lambda5, roots[i][1] * lambda4);
+    auto u      = std::min(root_a * lambda5, root_b * lambda4);
     for (auto iteration = 0; iteration < 5; iteration++) {
       auto u3 = u * u * u;
       u -= (u3 * u * (a * u + b) - target) / (u3 * (5 * a * u + 4 * b));
@@ -1063,7 +1064,7 @@ trace_pixel_plan estimate_pixel_plan(const scene_data& scene, const scene_bvh& b
   // The buffers then hold each pixel's V_hit, variance and cost at that
   // split (hit_variance held the variance of a hit's mean until then).
   auto plan = trace_pixel_plan{};
-  plan.splits.assign(pixels, 1);
+  if (params.split == 0) plan.splits.assign(pixels, 1);
   auto& variance = tail_variance;
   auto& cost     = tail_cost;
   for (size_t i = 0; i < pixels; i++) {
@@ -1076,7 +1077,7 @@ trace_pixel_plan estimate_pixel_plan(const scene_data& scene, const scene_bvh& b
         if (product < best_product * (1 - 1e-9)) best = split, best_product = product;
       }
     }
-    plan.splits[i] = (uint8_t)std::min(best, 255);
+    if (params.split == 0) plan.splits[i] = (uint8_t)best;
     variance[i]    = hit + tail / best;
     cost[i]        = 1 + best * tail_cost[i];
     hit_variance[i] = hit;

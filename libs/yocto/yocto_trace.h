@@ -203,8 +203,8 @@ struct trace_state {
   // and without it): an integer m >= 1 (m paths, each weighing 1 / m), or 1 / q
   // for q a power of two (one path every q samples, weighing q).
   std::vector<float>         rates   = {};
-  // Paths per camera ray of each pixel with adaptive sampling (empty
-  // without: every pixel takes `split`).
+  // Paths per camera ray of each pixel with adaptive sampling and an
+  // automatic split (empty otherwise: every pixel takes `split`).
   std::vector<uint8_t>       splits  = {};
 };
 
@@ -255,7 +255,8 @@ trace_pilot run_trace_pilot(const scene_data& scene, const scene_bvh& bvh,
 // unstratified pairs see as noisy, are not oversampled at high counts), and
 // are rounded to integers from 1 to 16 or to 1 / q for q = 2, 4, 8 dividing
 // params.samples (so that every pixel takes whole paths).
-// gain: the rates' predicted gain in efficiency, mean(v) mean(c) /
+// splits: each pixel's k, empty when params.split sets every pixel's (it
+// may pass what a byte holds). gain: the rates' predicted gain in efficiency, mean(v) mean(c) /
 // mean(sqrt(v c))^2. A pure function of the scene, the parameters, the
 // threshold and the seed, as the roulette's pilot.
 struct trace_pixel_plan {
