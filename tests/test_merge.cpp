@@ -291,7 +291,7 @@ TEST(merge, adaptive_renders_of_ranges_add_up_to_one_render) {
   auto error = std::string{};
   ASSERT_TRUE(make_scene_bvh(bvh, scene, {}, error)) << error;
   auto params       = trace_params{};
-  params.resolution = 24;
+  params.resolution = 48;
   params.samples    = 16;
   params.threads    = 2;
   ASSERT_TRUE(check_trace_params(scene, params, error)) << error;

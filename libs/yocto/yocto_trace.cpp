@@ -922,6 +922,61 @@ static void box_average(std::vector<double>& values, vec2i size, int radius) {
   }
 }
 
+// The plan's pilot measures one pixel in two, those of a checkerboard's
+// black squares; their even and odd columns are two independent halves.
+static bool pilot_measures(int i, int j) { return (i + j) % 2 == 0; }
+
+// Per pixel, the average of `values` over the pixels of its (2 radius + 1)^2
+// window that `counts(i, j)` includes (0 if none).
+template <typename Counts>
+static std::vector<double> window_average(
+    const std::vector<double>& values, vec2i size, int radius, Counts&& counts) {
+  auto sums = std::vector<double>(values.size()), weights = std::vector<double>(values.size());
+  for (auto j = 0; j < size.y; j++) {
+    for (auto i = 0; i < size.x; i++) {
+      auto pixel = (size_t)j * size.x + i;
+      if (!counts(i, j)) continue;
+      sums[pixel] = values[pixel], weights[pixel] = 1;
+    }
+  }
+  box_average(sums, size, radius);
+  box_average(weights, size, radius);
+  for (size_t pixel = 0; pixel < sums.size(); pixel++)
+    sums[pixel] = weights[pixel] > 0 ? sums[pixel] / weights[pixel] : 0.0;
+  return sums;
+}
+
+// A pilot's per-pixel estimates averaged over each pixel's window, shrunk
+// towards the field four times coarser by as much as their noise calls for.
+// The pilot's even and odd columns give two independent averages A and B of
+// the same smooth field; across the image, the covariance of their
+// departures from the coarse field C is the fine field's own variance s^2,
+// and (A - B)^2 / 4 the noise n^2 of their mean. Each pixel takes C +
+// s^2 / (s^2 + n^2) ((A + B) / 2 - C), the linear estimate of least squared
+// error (James and Stein 1961): the fine averages where they stand out of
+// their noise, the coarse field where the pilot saw only noise (an even
+// noise would otherwise be planned as uneven, and the rates lose to a
+// uniform render). Sums in pixel order: the same whatever the threads.
+static void shrink_window_average(std::vector<double>& values, vec2i size, int radius) {
+  auto even   = window_average(values, size, radius,
+      [](int i, int j) { return pilot_measures(i, j) && i % 2 == 0; });
+  auto odd    = window_average(values, size, radius,
+      [](int i, int j) { return pilot_measures(i, j) && i % 2 == 1; });
+  auto coarse = window_average(values, size, 4 * radius, pilot_measures);
+  // A one-column image has no odd half: its even half stands for both
+  // (no noise is seen, nothing is shrunk).
+  if (size.x == 1) odd = even;
+  auto signal = 0.0, noise = 0.0;
+  for (size_t i = 0; i < values.size(); i++) {
+    signal += (even[i] - coarse[i]) * (odd[i] - coarse[i]);
+    noise += (even[i] - odd[i]) * (even[i] - odd[i]) / 4;
+  }
+  auto weight = signal > 0 ? signal / (signal + noise) : 0.0;
+  if (!std::isfinite(weight)) weight = 0;
+  for (size_t i = 0; i < values.size(); i++)
+    values[i] = coarse[i] + weight * ((even[i] + odd[i]) / 2 - coarse[i]);
+}
+
 // Paths a sample per pixel (see estimate_pixel_plan). A pixel's camera hit
 // is a 2D integrand with edges (fibres against the sky), whose variance
 // under Owen-scrambled nets falls as n^-1.5 (Owen 1997), the paths after
@@ -1010,11 +1065,12 @@ static std::vector<float> allocate_stratified_rates(const std::vector<double>& h
   return rates;
 }
 
-// The per-pixel plan (see the header): 2 camera samples a pixel, each hit
-// continued by 2 paths, with numbers of their own; per pixel, the variance
-// between the two paths of a hit (the tail's, V_tail), the variance of a
-// hit's mean, V_hit + V_tail / 2, and the tail's rays, each averaged over
-// 7 x 7 pixels. Then per pixel the split and the rates.
+// The per-pixel plan (see the header): on one pixel in two, 2 camera
+// samples, each hit continued by 2 paths, with numbers of their own; per
+// pixel, the variance between the two paths of a hit (the tail's, V_tail),
+// the variance of a hit's mean, V_hit + V_tail / 2, and the tail's rays,
+// averaged over 7 x 7 pixels, the variances shrunk by their noise. Then per
+// pixel the split and the rates.
 trace_pixel_plan estimate_pixel_plan(const scene_data& scene, const scene_bvh& bvh,
     const trace_context& context, const trace_params& params, float roulette_threshold,
     const trace_allocation* allocation) {
@@ -1030,6 +1086,7 @@ trace_pixel_plan estimate_pixel_plan(const scene_data& scene, const scene_bvh& b
         scene, bvh, context, params, roulette_threshold, rays, nullptr, nullptr, nullptr, allocation};
     for (auto j = (int)begin; j < (int)end; j++) {
       for (auto i = 0; i < size.x; i++) {
+        if (!pilot_measures(i, j)) continue;
         auto pixel  = (int64_t)j * size.x + i;
         auto means  = std::array<vec3f, 2>{};
         auto within = 0.0, camera_rays = 0.0;
@@ -1053,9 +1110,12 @@ trace_pixel_plan estimate_pixel_plan(const scene_data& scene, const scene_bvh& b
       }
     }
   });
-  box_average(tail_variance, size, 3);
-  box_average(hit_variance, size, 3);
-  box_average(tail_cost, size, 3);
+  shrink_window_average(tail_variance, size, 3);
+  shrink_window_average(hit_variance, size, 3);
+  // The rays are not shrunk: a sky pixel's are exact (none after the
+  // camera's), and shrunk towards the hair's they would budget rays that
+  // are never cast.
+  tail_cost = window_average(tail_cost, size, 3, pilot_measures);
   // Per pixel, a sample is a camera ray and its hit (one ray) continued by
   // k paths of c_tail rays each: its variance is V_hit + V_tail / k and
   // its cost 1 + k c_tail. The k that minimises their product is the
@@ -1068,9 +1128,12 @@ trace_pixel_plan estimate_pixel_plan(const scene_data& scene, const scene_bvh& b
   auto& variance = tail_variance;
   auto& cost     = tail_cost;
   for (size_t i = 0; i < pixels; i++) {
-    auto tail = tail_variance[i], hit = std::max(hit_variance[i] - tail / 2, 0.0);
+    // Where no hit was continued (sky), there is no tail to split, and
+    // none of the variance shrinking gave it is the tail's.
+    auto tail = tail_cost[i] > 0 ? tail_variance[i] : 0.0;
+    auto hit  = std::max(hit_variance[i] - tail / 2, 0.0);
     auto best = std::max(params.split, 1);
-    if (params.split == 0) {
+    if (params.split == 0 && tail_cost[i] > 0) {
       auto best_product = std::numeric_limits<double>::max();
       for (auto split = 1; split <= trace_max_split; split++) {
         auto product = (hit + tail / split) * (1 + split * tail_cost[i]);

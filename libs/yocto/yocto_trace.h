@@ -238,22 +238,26 @@ struct trace_pilot {
 trace_pilot run_trace_pilot(const scene_data& scene, const scene_bvh& bvh,
     const trace_context& context, const trace_params& params);
 
-// The per-pixel plan of adaptive sampling. A pilot traces 2 camera samples
-// a pixel, each hit continued by 2 paths, with numbers of their own (the
-// image stays unbiased: no path of the pilot is in it), and measures per
-// pixel, averaged over 7 x 7 pixels: the variance between the paths of one
-// hit (the tail's, V_tail), the variance of the camera's hit (V_hit, from the
-// spread of the two hits' means) and the tail's rays c. A sample of the pixel
-// then costs 1 + k c rays for k paths per camera ray and has variance
-// V_hit + V_tail / k; the split k (1 ... 8, or params.split) minimises their
-// product, the optimum of splitting at the first vertex (as EARS, Rath et
-// al. 2022, from the pixel's own statistics). The rates minimise the
-// image's mean squared error for the cost of params.samples samples a pixel
-// at each pixel's split, with the camera hit's part of a pixel's error
-// falling as n^-1.5 (Owen-scrambled nets on a 2D integrand with edges) and
-// the rest as n^-1 (so that fibre edges against the sky, which the pilot's
-// unstratified pairs see as noisy, are not oversampled at high counts), and
-// are rounded to integers from 1 to 16 or to 1 / q for q = 2, 4, 8 dividing
+// The per-pixel plan of adaptive sampling. A pilot traces, on one pixel in
+// two (a checkerboard), 2 camera samples, each hit continued by 2 paths,
+// with numbers of their own (the image stays unbiased: no path of the pilot
+// is in it), and measures per pixel, averaged over 7 x 7 pixels: the
+// variance between the paths of one hit (the tail's, V_tail), the variance
+// of the camera's hit (V_hit, from the spread of the two hits' means) and
+// the tail's rays c. Each variance is shrunk towards its average over
+// 25 x 25 pixels by as much as the pilot's noise calls for (measured between
+// its even and odd columns), so that a noise that is even across the image
+// is planned as even. A sample of the pixel then costs 1 + k c rays for k
+// paths per camera ray and has variance V_hit + V_tail / k; the split k
+// (1 ... 8, or params.split) minimises their product, the optimum of
+// splitting at the first vertex (as EARS, Rath et al. 2022, from the
+// pixel's own statistics). The rates minimise the image's mean squared
+// error for the cost of params.samples samples a pixel at each pixel's
+// split, with the camera hit's part of a pixel's error falling as n^-1.5
+// (Owen-scrambled nets on a 2D integrand with edges) and the rest as n^-1
+// (so that fibre edges against the sky, which the pilot's unstratified
+// pairs see as noisy, are not oversampled at high counts), and are rounded
+// to integers from 1 to 16 or to 1 / q for q = 2, 4, 8 dividing
 // params.samples (so that every pixel takes whole paths).
 // splits: each pixel's k, empty when params.split sets every pixel's (it
 // may pass what a byte holds). gain: the rates' predicted gain in efficiency, mean(v) mean(c) /
