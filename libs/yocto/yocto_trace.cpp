@@ -640,9 +640,10 @@ bool check_trace_params(const scene_data& scene, const trace_params& params,
 double trace_image_bytes(const scene_data& scene, const trace_params& params) {
   auto size = camera_resolution(scene.cameras[params.camera], params.resolution);
   // Adaptive sampling: the rates and splits, and the pilot's three buffers
-  // and a row.
+  // and, while one is shrunk, six more (its two halves, its coarse field, a
+  // window's sums and weights, a row).
   auto adaptive = params.adaptive != trace_adaptive_type::off
-                      ? sizeof(float) + sizeof(uint8_t) + 4 * sizeof(double)
+                      ? sizeof(float) + sizeof(uint8_t) + 9 * sizeof(double)
                       : 0;
   return (double)size.x * (double)size.y *
              (sizeof(fixed_sum3) + sizeof(vec3f) + 3 * sizeof(uint8_t) + adaptive) +

@@ -243,17 +243,23 @@ def write_report(args, rows, checks, hashes):
              f"after = {args.commits.split()[1] if args.commits else hashes['after']}. "
              f"Every render: 31 bounces, no clamp, seed 1, {args.threads} threads; CPU seconds "
              f"of the render (all threads, load and BVH build excluded), median of "
-             f"{args.headline_runs} runs for `before` and `after`, {args.runs} for the others. MSE against the mean of both binaries' references "
-             f"({args.reference_spp} spp each, as four renders of different seeds), minus the "
+             f"{args.headline_runs} runs for `before` and `after`, {args.runs} for the others. MSE against "
+             + ("the `before` binary's reference" if args.before_reference_only
+                else "the mean of both binaries' references")
+             + f" ({args.reference_spp} spp each, as four renders of different seeds), minus the "
              "references' own noise. Efficiency = 1 / (MSE · CPU-s); the ratio is against "
              "`before` at the same spp.", "",
-             "## The image is unchanged in expectation", "",
-             "| scene | pixels | mean before | mean after | difference (standard errors) | "
-             "squared difference / summed noise |", "|---|---:|---:|---:|---:|---:|"]
-    for c in checks:
-        lines.append(f"| {c['scene']} | {c['resolution']} | {c['mean_before']:.5f} | "
-                     f"{c['mean_after']:.5f} | {c['z']:+.2f} | {c['ratio']:.3f} |")
-    lines += ["", "A ratio near 1 means the two references differ by their noise alone.", ""]
+             "## The image is unchanged in expectation", ""]
+    if checks:
+        lines += ["| scene | pixels | mean before | mean after | difference (standard errors) | "
+                  "squared difference / summed noise |", "|---|---:|---:|---:|---:|---:|"]
+        for c in checks:
+            lines.append(f"| {c['scene']} | {c['resolution']} | {c['mean_before']:.5f} | "
+                         f"{c['mean_after']:.5f} | {c['z']:+.2f} | {c['ratio']:.3f} |")
+        lines += ["", "A ratio near 1 means the two references differ by their noise alone.", ""]
+    else:
+        lines += ["Not checked in this run (`--before-reference-only`: the `after` binary's "
+                  "reference was not rendered).", ""]
     table = {(r["scene"], r["variant"], r["spp"]): r for r in rows}
     scenes = list(dict.fromkeys(r["scene"] for r in rows))
 
@@ -280,19 +286,21 @@ def write_report(args, rows, checks, hashes):
             continue
         lines.append(f"| {label} (`{variant}`) | " +
                      " | ".join(gain(name, "after", variant, 64) for name in scenes) + " |")
-    lines += ["", "## The thesis's claim: two Sobol numbers demuxed into four", "",
-              "MSE of the hair's direction sampled from two numbers demuxed into four (the "
-              "thesis's), from four Sobol dimensions (the default), and from independent "
-              "numbers everywhere (where the demux has nothing to preserve).", "",
-              "| scene | spp | demux, Sobol | four Sobol | demux, independent | four independent |",
-              "|---|---:|---:|---:|---:|---:|"]
-    for name in scenes:
-        for spp in CHECKPOINTS:
-            values = [table.get((name, v, spp)) for v in
-                      ["after-demux", "after", "after-demux-independent", "after-independent"]]
-            if all(values):
-                lines.append(f"| {name} | {spp} | " +
-                             " | ".join(f"{v['mse']:.4g}" for v in values) + " |")
+    demux = ["after-demux", "after", "after-demux-independent", "after-independent"]
+    demux_rows = [(name, spp, [table.get((name, v, spp)) for v in demux])
+                  for name in scenes for spp in CHECKPOINTS]
+    demux_rows = [row for row in demux_rows if all(row[2])]
+    # The thesis's claim only when its variants were run.
+    if demux_rows:
+        lines += ["", "## The thesis's claim: two Sobol numbers demuxed into four", "",
+                  "MSE of the hair's direction sampled from two numbers demuxed into four (the "
+                  "thesis's), from four Sobol dimensions (the default), and from independent "
+                  "numbers everywhere (where the demux has nothing to preserve).", "",
+                  "| scene | spp | demux, Sobol | four Sobol | demux, independent | four independent |",
+                  "|---|---:|---:|---:|---:|---:|"]
+        for name, spp, values in demux_rows:
+            lines.append(f"| {name} | {spp} | " +
+                         " | ".join(f"{v['mse']:.4g}" for v in values) + " |")
     lines.append("")
     for name in dict.fromkeys(r["scene"] for r in rows):
         lines += [f"## {name}", "",
