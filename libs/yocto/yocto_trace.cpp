@@ -928,10 +928,10 @@ static void box_average(std::vector<double>& values, vec2i size, int radius) {
 static bool pilot_measures(int i, int j) { return (i + j) % 2 == 0; }
 
 // Per pixel, the average of `values` over the pixels of its (2 radius + 1)^2
-// window that `counts(i, j)` includes (0 if none).
+// window that `counts(i, j)` includes (`none` if it includes none).
 template <typename Counts>
-static std::vector<double> window_average(
-    const std::vector<double>& values, vec2i size, int radius, Counts&& counts) {
+static std::vector<double> window_average(const std::vector<double>& values, vec2i size,
+    int radius, Counts&& counts, double none = 0) {
   auto sums = std::vector<double>(values.size()), weights = std::vector<double>(values.size());
   for (auto j = 0; j < size.y; j++) {
     for (auto i = 0; i < size.x; i++) {
@@ -943,7 +943,7 @@ static std::vector<double> window_average(
   box_average(sums, size, radius);
   box_average(weights, size, radius);
   for (size_t pixel = 0; pixel < sums.size(); pixel++)
-    sums[pixel] = weights[pixel] > 0 ? sums[pixel] / weights[pixel] : 0.0;
+    sums[pixel] = weights[pixel] > 0 ? sums[pixel] / weights[pixel] : none;
   return sums;
 }
 
@@ -959,16 +959,18 @@ static std::vector<double> window_average(
 // noise would otherwise be planned as uneven, and the rates lose to a
 // uniform render). Sums in pixel order: the same whatever the threads.
 static void shrink_window_average(std::vector<double>& values, vec2i size, int radius) {
+  auto none   = std::numeric_limits<double>::quiet_NaN();
   auto even   = window_average(values, size, radius,
-      [](int i, int j) { return pilot_measures(i, j) && i % 2 == 0; });
+      [](int i, int j) { return pilot_measures(i, j) && i % 2 == 0; }, none);
   auto odd    = window_average(values, size, radius,
-      [](int i, int j) { return pilot_measures(i, j) && i % 2 == 1; });
+      [](int i, int j) { return pilot_measures(i, j) && i % 2 == 1; }, none);
   auto coarse = window_average(values, size, 4 * radius, pilot_measures);
-  // A one-column image has no odd half: its even half stands for both
-  // (no noise is seen, nothing is shrunk).
-  if (size.x == 1) odd = even;
   auto signal = 0.0, noise = 0.0;
   for (size_t i = 0; i < values.size(); i++) {
+    // A window with one half only (an image one pixel wide or high): that
+    // half stands for both there (no noise is seen in it).
+    if (std::isnan(even[i])) even[i] = odd[i];
+    if (std::isnan(odd[i])) odd[i] = even[i];
     signal += (even[i] - coarse[i]) * (odd[i] - coarse[i]);
     noise += (even[i] - odd[i]) * (even[i] - odd[i]) / 4;
   }

@@ -260,9 +260,10 @@ trace_pilot run_trace_pilot(const scene_data& scene, const scene_bvh& bvh,
 // to integers from 1 to 16 or to 1 / q for q = 2, 4, 8 dividing
 // params.samples (so that every pixel takes whole paths).
 // splits: each pixel's k, empty when params.split sets every pixel's (it
-// may pass what a byte holds). gain: the rates' predicted gain in efficiency, mean(v) mean(c) /
-// mean(sqrt(v c))^2. A pure function of the scene, the parameters, the
-// threshold and the seed, as the roulette's pilot.
+// may pass what a byte holds). gain: the rates' predicted gain in
+// efficiency, mean(v) mean(c) / mean(sqrt(v c))^2. A pure function of the
+// scene, the parameters, the threshold and the seed, as the roulette's
+// pilot.
 struct trace_pixel_plan {
   std::vector<float>   rates  = {};
   std::vector<uint8_t> splits = {};
