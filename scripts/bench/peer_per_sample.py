@@ -18,22 +18,16 @@ paths still alive there cost. Run it on an idle machine: every CPU figure is a s
 
 import argparse
 import datetime
-import hashlib
 import os
 import re
 import subprocess
 import sys
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from peer_table import COMPARE, ROOT, SUNS, cached, scene_dir  # noqa: E402
+from peer_table import COMPARE, ROOT, SUNS, binary_id, cached, scene_dir  # noqa: E402
 
 HERE = os.path.dirname(COMPARE)
 RES, SPP, BOUNCES = 256, 64, 31
-
-
-def sha(path):
-    with open(path, "rb") as f:
-        return hashlib.sha256(f.read()).hexdigest()[:12]
 
 
 def render_ours(yscene, scene, out, spp, seed, bounces, flags):
@@ -103,12 +97,12 @@ def main():
                  f"in {scene} (measure it with peer_table.py first)")
     refs = os.path.join(scene, f"refs-r{RES}-b{BOUNCES}-n{args.ref_spp}")
     runs = os.path.join(scene, f"runs-r{RES}-b{BOUNCES}-s{SPP}")
-    ours_ref = os.path.join(refs, f"yocto-{sha(ref_yscene)}")
+    ours_ref = os.path.join(refs, f"yocto-{binary_id(ref_yscene)}")
     if not os.path.exists(ours_ref + "-A.exr") or not os.path.exists(ours_ref + "-B.exr"):
         sys.exit(f"peer_per_sample.py: no yocto-hair reference {ours_ref}-A/B.exr (give --ref-yscene)")
     mine = os.path.join(scene, "per-sample")
     os.makedirs(mine, exist_ok=True)
-    binary = sha(yscene)
+    binary = binary_id(yscene)
 
     # Error and CPU per camera sample at full depth.
     rows = []
@@ -117,15 +111,15 @@ def main():
             out = os.path.join(mine, f"yocto-{binary}-{'plan' if not flags else 'uniform'}-{seed}")
             print(f"{name}, seed {seed}...", file=sys.stderr, flush=True)
             render_ours(yscene, scene, out, SPP, seed, BOUNCES, flags)
-            rows.append(f"{name}\t{out}\t{ours_ref}")
+            rows.append((name, out, ours_ref))
         for sampler in ["independent", "multijitter", "orthogonal"]:
-            rows.append(f"mitsuba {sampler}\t{os.path.join(runs, f'mitsuba-{sampler}-{seed}')}\t"
-                        f"{os.path.join(refs, 'mitsuba')}")
+            rows.append((f"mitsuba {sampler}", os.path.join(runs, f"mitsuba-{sampler}-{seed}"),
+                         os.path.join(refs, "mitsuba")))
         for pattern in ["tsobol", "blue", "auto"]:
-            rows.append(f"cycles5 {pattern}\t{os.path.join(runs, f'cycles5-{pattern}-{seed}')}\t"
-                        f"{os.path.join(refs, 'cycles5')}")
-    # score.py takes "NAME RUN REF" with spaces: names without spaces for it.
-    score_args = [row.replace(" ", "-").replace("\t", " ") for row in rows]
+            rows.append((f"cycles5 {pattern}", os.path.join(runs, f"cycles5-{pattern}-{seed}"),
+                         os.path.join(refs, "cycles5")))
+    # score.py takes "NAME RUN REF" split at spaces: names without them.
+    score_args = [f"{name.replace(' ', '-')} {run} {ref}" for name, run, ref in rows]
     env = dict(os.environ, HOME=os.path.join(args.work, "home"))
     scored = subprocess.run([os.path.join(args.work, "venv", "bin", "python"),
                              os.path.join(HERE, "score.py")] + score_args,

@@ -51,6 +51,12 @@ def cells():
     return result
 
 
+def binary_id(path):
+    """A binary's id as compare.sh keys its runs: the first 12 digits of its sha256."""
+    with open(path, "rb") as f:
+        return hashlib.sha256(f.read()).hexdigest()[:12]
+
+
 def scene_dir(work, variant, eumelanin, sun):
     return os.path.join(work, f"scene-{variant}-20000-e{eumelanin}-p0" +
                         (f"-sun{sun.replace(',', '_')}" if sun else ""))
@@ -110,8 +116,7 @@ def main():
     if args.ref_yscene:
         args.ref_yscene = os.path.abspath(args.ref_yscene)
     os.makedirs(args.work, exist_ok=True)
-    with open(args.yscene, "rb") as f:
-        binary = hashlib.sha256(f.read()).hexdigest()[:12]
+    binary = binary_id(args.yscene)
     table = []
     for name, variant, eumelanin, sun, res, spp, seeds in cells():
         if args.cells and not any(part in name for part in args.cells):
