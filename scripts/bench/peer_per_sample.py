@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Per camera sample, yocto-hair against Cycles 5 and Mitsuba 3 on one of issue 36's cells:
-CPU and error of one camera sample, with and without yocto-hair's per-pixel plan, and CPU
-against path depth.
+CPU and error of one camera sample, with and without yocto-hair's per-pixel plan, where in the
+image the error is (rings.py), and CPU against path depth.
 
     python3 scripts/bench/peer_per_sample.py --cell "curly e0.3 sun" [--yscene build/apps/yscene]
         [--ref-yscene PATH] [--work ~/.cache/yocto-hair/peers] [--seeds 3 4 5]
@@ -27,6 +27,7 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from peer_table import COMPARE, ROOT, SUNS, binary_id, cached, scene_dir  # noqa: E402
 
 HERE = os.path.dirname(COMPARE)
+BENCH = os.path.dirname(os.path.abspath(__file__))
 RES, SPP, BOUNCES = 256, 64, 31
 
 
@@ -133,6 +134,15 @@ def main():
             table.append((name, float(mse), float(cpu), float(efficiency)))
     best_peer = max((row for row in table if not row[0].startswith("yocto")), key=lambda r: r[3])
 
+    # Where the error is: MSE in rings about the centre, ours against the best peer's.
+    ringed = ["yocto-hair", "yocto-hair-uniform", best_peer[0]]
+    ring_args = [arg for arg in score_args if arg.split()[0] in ringed]
+    ring_lines = subprocess.run([os.path.join(args.work, "venv", "bin", "python"),
+                                 os.path.join(BENCH, "rings.py")] + ring_args,
+                                check=True, capture_output=True, text=True, env=env).stdout.splitlines()
+    ring_bounds, ring_pixels = ring_lines[0].split()[1:], [int(v) for v in ring_lines[1].split()[1:]]
+    ring_mse = {line.split()[0]: [float(v) for v in line.split()[1:]] for line in ring_lines[2:]}
+
     # CPU against depth.
     sweep = []
     for bounces in args.bounces:
@@ -161,6 +171,29 @@ def main():
     for name, mse, cpu, efficiency in sorted(table, key=lambda r: -r[3]):
         lines.append(f"| {name} | {mse:.4g} | {cpu:.2f} | {efficiency:.1f} | {cpu / samples * 1e6:.2f} | "
                      f"{mse * samples:.4g} | {efficiency / best_peer[3]:.2f} |")
+    lines += [
+        "",
+        f"Where the error is (`scripts/bench/rings.py`): MSE in rings about the image centre (radius "
+        f"as a fraction of the half width; on the ball the centre shows strands end on, lit through "
+        f"many fibres), against the best peer ({best_peer[0]}) in the same ring, and the share of "
+        f"the image's error in each ring. CPU is the whole image's, so a ring's efficiency against "
+        f"the peer is not these ratios alone.",
+        "",
+        "| ring | pixels | yocto-hair MSE / peer's | uniform MSE / peer's | yocto-hair share | uniform share | peer share |",
+        "|---|---:|---:|---:|---:|---:|---:|",
+    ]
+    shares = {}
+    for name in ringed:
+        total = sum(m * n for m, n in zip(ring_mse[name], ring_pixels))
+        shares[name] = [m * n / total for m, n in zip(ring_mse[name], ring_pixels)]
+    for i, bounds in enumerate(ring_bounds):
+        peer_mse = ring_mse[best_peer[0]][i]
+
+        def ratio(name):
+            return f"{ring_mse[name][i] / peer_mse:.2f}" if peer_mse > 0 else "–"
+        lines.append(f"| {bounds} | {ring_pixels[i]} | {ratio('yocto-hair')} | {ratio('yocto-hair-uniform')} | "
+                     f"{shares['yocto-hair'][i]:.2f} | {shares['yocto-hair-uniform'][i]:.2f} | "
+                     f"{shares[best_peer[0]][i]:.2f} |")
     lines += [
         "",
         f"CPU against path depth ({args.sweep_spp} spp, seed 3; yocto-hair `--no-adaptive`, Cycles 5 "
