@@ -5,10 +5,11 @@ ring), MSE averaged over the runs of one NAME.
 
     rings.py "NAME RUN REF" ...   (RUN.exr; REF-A.exr, REF-B.exr)
 
-Prints the ring bounds, the pixels in each ring, then one line per NAME: its MSE in each ring. The rings are
-fractions of the image's half width: on the peers' hair ball the first is the ball's centre
-(strands seen end on, light reaching them through many fibres) and the last the sky about it.
-Runs with the peers' venv (score.py's numpy and Mitsuba, which reads the EXRs)."""
+Prints the ring bounds, the pixels in each ring, then one line per NAME: its MSE in each ring.
+The rings are fractions of the image's half width: on the peers' hair ball the first is the
+ball's centre (strands seen end on, light reaching them through many fibres) and the last the
+sky about it. Runs with the peers' venv (score.py's numpy and Mitsuba, which reads the EXRs;
+score.py runs as a script, so its reader is not imported)."""
 import sys
 
 import numpy as np
