@@ -23,12 +23,19 @@ import re
 import subprocess
 import sys
 
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+BENCH = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, BENCH)
 from peer_table import COMPARE, ROOT, SUNS, binary_id, cached, scene_dir  # noqa: E402
 
 HERE = os.path.dirname(COMPARE)
-BENCH = os.path.dirname(os.path.abspath(__file__))
 RES, SPP, BOUNCES = 256, 64, 31
+
+
+def run_in_peers_venv(work, script, arguments):
+    """Runs a scoring script with the peers' venv (numpy, Mitsuba's EXR reader); returns stdout."""
+    env = dict(os.environ, HOME=os.path.join(work, "home"))
+    return subprocess.run([os.path.join(work, "venv", "bin", "python"), script] + arguments,
+                          check=True, capture_output=True, text=True, env=env).stdout
 
 
 def render_ours(yscene, scene, out, spp, seed, bounces, flags):
@@ -121,10 +128,7 @@ def main():
                          os.path.join(refs, "cycles5")))
     # score.py takes "NAME RUN REF" split at spaces: names without them.
     score_args = [f"{name.replace(' ', '-')} {run} {ref}" for name, run, ref in rows]
-    env = dict(os.environ, HOME=os.path.join(args.work, "home"))
-    scored = subprocess.run([os.path.join(args.work, "venv", "bin", "python"),
-                             os.path.join(HERE, "score.py")] + score_args,
-                            check=True, capture_output=True, text=True, env=env).stdout
+    scored = run_in_peers_venv(args.work, os.path.join(HERE, "score.py"), score_args)
     samples = RES * RES * SPP
     table = []
     for line in scored.splitlines():
@@ -137,11 +141,10 @@ def main():
     # Where the error is: MSE in rings about the centre, ours against the best peer's.
     ringed = ["yocto-hair", "yocto-hair-uniform", best_peer[0]]
     ring_args = [arg for arg in score_args if arg.split()[0] in ringed]
-    ring_lines = subprocess.run([os.path.join(args.work, "venv", "bin", "python"),
-                                 os.path.join(BENCH, "rings.py")] + ring_args,
-                                check=True, capture_output=True, text=True, env=env).stdout.splitlines()
-    ring_bounds, ring_pixels = ring_lines[0].split()[1:], [int(v) for v in ring_lines[1].split()[1:]]
-    ring_mse = {line.split()[0]: [float(v) for v in line.split()[1:]] for line in ring_lines[2:]}
+    ring_rows = [line.split() for line in
+                 run_in_peers_venv(args.work, os.path.join(BENCH, "rings.py"), ring_args).splitlines()]
+    ring_bounds, ring_pixels = ring_rows[0][1:], [int(v) for v in ring_rows[1][1:]]
+    ring_mse = {row[0]: [float(v) for v in row[1:]] for row in ring_rows[2:]}
 
     # CPU against depth.
     sweep = []
