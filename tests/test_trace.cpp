@@ -74,9 +74,15 @@ TEST(trace, white_furnace_matte_sphere_renders_the_environment) {
   // sphere light samples (--lights all; automatic leaves the constant sky to
   // BSDF sampling) is noisier per path (standard deviation about 0.25): 12x12
   // pixels at 16384 spp, so 3.3 sigma is 0.65% with independent numbers.
+  // Every pixel takes its 256 camera samples (no per-pixel plan): a camera
+  // ray grazing the tessellated sphere, whose shading normal faces away,
+  // brings 0, and the plan, whose pilot rarely meets one, gives some edge
+  // pixels 64 camera samples (8 paths each), where one such ray is 1/64
+  // (the mean stays 1: adaptive_images_are_unbiased_at_any_sample_count).
   for (auto sampler : {trace_sampler_type::naive, trace_sampler_type::path}) {
     auto naive        = sampler == trace_sampler_type::naive;
     auto params       = trace_params{};
+    params.adaptive   = trace_adaptive_type::off;
     params.resolution = naive ? 24 : 12;
     params.samples    = naive ? 256 : 16384;
     params.sampler    = sampler;
@@ -895,9 +901,10 @@ TEST(trace, adaptive_sampling_keeps_the_mean_and_spends_where_the_noise_is) {
 TEST(trace, adaptive_sampling_lowers_the_error_for_its_rays) {
   // The hair scene at 32x32 against a uniform reference of 2048 spp (another
   // seed): at 64 spp, 3 seeds, the MSE times the rays of adaptive renders
-  // with one path per camera ray (measured 0.91x) and of the default plan,
-  // each pixel its own split (measured 0.90x), are below the uniform
-  // renders'.
+  // with one path per camera ray (measured 0.974x) and of the default plan,
+  // each pixel its own split (measured 0.973x), are below the uniform
+  // renders'. The plan spends the uniform render's rays, whatever splits it
+  // picks (its budget, from the pilot's 2 paths a pixel): within 5% of them.
   auto scene        = make_hair_test_scene();
   auto params       = trace_params{};
   params.resolution = 32;
@@ -909,23 +916,29 @@ TEST(trace, adaptive_sampling_lowers_the_error_for_its_rays) {
   auto reference    = render_scene(scene, params).image;
   params.samples    = 64;
   auto uniform = 0.0, adaptive = 0.0, planned = 0.0;
+  auto uniform_rays = 0.0, planned_rays = 0.0;
   for (auto seed : {1, 2, 3}) {
     params.seed     = (uint64_t)seed;
     params.split    = 1;
     params.adaptive = trace_adaptive_type::off;
     auto one        = render_scene(scene, params);
     uniform += image_mse(one.image, reference) * (double)one.rays;
+    uniform_rays += (double)one.rays;
     params.adaptive = trace_adaptive_type::on;
     auto other      = render_scene(scene, params);
     adaptive += image_mse(other.image, reference) * (double)other.rays;
     params.split    = 0;
     auto plan       = render_scene(scene, params);
     planned += image_mse(plan.image, reference) * (double)plan.rays;
+    planned_rays += (double)plan.rays;
   }
-  std::printf("[ figure ] MSE x rays: uniform %g adaptive %g (%.2fx) planned %g (%.2fx)\n",
-      uniform, adaptive, adaptive / uniform, planned, planned / uniform);
+  std::printf("[ figure ] MSE x rays: uniform %g adaptive %g (%.2fx) planned %g (%.2fx), "
+              "planned rays %.3fx uniform's\n",
+      uniform, adaptive, adaptive / uniform, planned, planned / uniform,
+      planned_rays / uniform_rays);
   EXPECT_LT(adaptive, uniform);
   EXPECT_LT(planned, uniform);
+  EXPECT_NEAR(planned_rays / uniform_rays, 1, 0.05);
 }
 
 // A glossy wall under a constant sky, filling the frame (every pixel sees
@@ -991,15 +1004,24 @@ TEST(trace, pixel_plan_predicts_its_gain_and_splits_where_the_tail_is_noisy) {
       for (auto split : plan.splits) EXPECT_GT(split, 1);
       // Even noise, planned as near even: the pilot's 2 samples a pixel
       // vary from pixel to pixel, and unshrunk (see estimate_pixel_plan)
-      // they gave 59% of the pixels rate 1, the others 1/4 to 5 (and a
-      // predicted gain of 1.45); shrunk, 84% at 1, the others 1/2 or 2.
-      auto even = std::count(plan.rates.begin(), plan.rates.end(), 1.0f);
-      std::printf("[ figure ] plan, the whole frame: %d of %d pixels at rate 1\n", (int)even,
-          (int)plan.rates.size());
-      EXPECT_GE(even, (int)plan.rates.size() * 3 / 4);
+      // they gave 59% of the pixels one rate, the others 1/4 to 5 times it
+      // (and a predicted gain of 1.45); shrunk, 73% at one rate, the others
+      // half or twice it. That rate is below 1 (1/4): the splits (about 7
+      // paths a camera ray) are paid from uniform sampling's rays, and
+      // rates below 1 are powers of 1/2, coarser steps than above.
+      auto common = plan.rates[0];
+      auto even   = std::count(plan.rates.begin(), plan.rates.end(), common);
       for (auto rate : plan.rates) {
-        EXPECT_GE(rate, 0.5f);
-        EXPECT_LE(rate, 2.0f);
+        auto count = std::count(plan.rates.begin(), plan.rates.end(), rate);
+        if (count > even) common = rate, even = count;
+      }
+      std::printf("[ figure ] plan, the whole frame: %d of %d pixels at rate %g\n", (int)even,
+          (int)plan.rates.size(), common);
+      EXPECT_LT(common, 1.0f);
+      EXPECT_GE(even, (int)plan.rates.size() * 2 / 3);
+      for (auto rate : plan.rates) {
+        EXPECT_GE(rate, common / 2);
+        EXPECT_LE(rate, common * 2);
       }
     }
     auto state = trace_state{};

@@ -987,30 +987,33 @@ static void shrink_window_average(std::vector<double>& values, vec2i size, int r
 // V_hit, b = V_tail / k (variance - hit), for n c rays. Minimising the
 // image's sum for a budget gives 1.5 a n^-2.5 + b n^-2 = lambda c in every
 // pixel (solved for n by Newton's method, below), lambda the smallest whose
-// rounded rates cost no more than one sample a pixel at each pixel's cost
-// (bisection on log lambda). With a = 0 it is the allocation in proportion
-// to sqrt(b / c). Variances that are not finite give every pixel a path a
-// sample.
+// rounded rates cost no more than `budget` rays a sample slot, summed over
+// the pixels (bisection on log lambda). With a = 0 it is the allocation in
+// proportion to sqrt(b / c). Variances that are not finite give every pixel
+// a path a sample.
+// The fewest paths a pixel may take: one every q samples, q a power of two
+// that divides the sample count (up to 8), so that the render takes whole
+// paths in every pixel.
+static int max_sample_stride(int samples) {
+  auto every = 1;
+  while (every < 8 && samples % (every * 2) == 0) every *= 2;
+  return every;
+}
+
 static std::vector<float> allocate_stratified_rates(const std::vector<double>& hit,
-    const std::vector<double>& variance, const std::vector<double>& cost, int samples,
-    int threads) {
+    const std::vector<double>& variance, const std::vector<double>& cost, double budget,
+    int samples, int threads) {
   auto pixels = variance.size();
-  // Fewer paths than one a sample: one every q samples, q a power of two
-  // that divides the sample count (up to 8), so that the render takes whole
-  // paths in every pixel.
-  auto max_every = 1;
-  while (max_every < 8 && samples % (max_every * 2) == 0) max_every *= 2;
+  auto max_every = max_sample_stride(samples);
   auto quantize = [&](double rate) -> float {
     if (rate >= 1) return (float)std::min((double)adaptive_max_paths, std::round(rate));
     auto every = 1;
     while (every < max_every && rate * every * std::sqrt(2.0) < 1) every *= 2;
     return 1.0f / (float)every;
   };
-  auto rates  = std::vector<float>(pixels, 1.0f);
-  auto budget = 0.0;
+  auto rates = std::vector<float>(pixels, 1.0f);
   for (size_t i = 0; i < pixels; i++) {
     if (!std::isfinite(hit[i]) || !std::isfinite(variance[i])) return rates;
-    budget += cost[i];
   }
   // With u = n^-1/2 the condition is 1.5 a u^5 + b u^4 = lambda c, convex
   // and increasing in u: Newton's method from the smaller of the roots of
@@ -1123,13 +1126,23 @@ trace_pixel_plan estimate_pixel_plan(const scene_data& scene, const scene_bvh& b
   // k paths of c_tail rays each: its variance is V_hit + V_tail / k and
   // its cost 1 + k c_tail. The k that minimises their product is the
   // classic optimum of splitting (EARS's factor at the first vertex, from
-  // the pixel's own statistics), searched over the integers 1 ... 8.
-  // The buffers then hold each pixel's V_hit, variance and cost at that
+  // the pixel's own statistics), searched over the integers 1 ... 8, and
+  // no more than the fewest paths' stride q: a pixel at k paths a camera
+  // ray and one camera ray every q samples then costs no more than a
+  // uniform sample, so the budget below can always be met (no splits at an
+  // odd sample count). The buffers then hold each pixel's V_hit, variance and cost at that
   // split (hit_variance held the variance of a hit's mean until then).
   auto plan = trace_pixel_plan{};
   if (params.split == 0) plan.splits.assign(pixels, 1);
-  auto& variance = tail_variance;
-  auto& cost     = tail_cost;
+  // The budget is the rays of params.samples samples a pixel without the
+  // plan (no rates, a pixel's split params.split or 1): `--samples N` costs
+  // what N uniform samples cost, whatever rates and splits the plan picks,
+  // so that a render at N is compared with others at N for the same work.
+  auto budget = 0.0;
+  for (size_t i = 0; i < pixels; i++) budget += 1 + std::max(params.split, 1) * tail_cost[i];
+  auto  max_split = std::min(trace_max_split, max_sample_stride(params.samples));
+  auto& variance  = tail_variance;
+  auto& cost      = tail_cost;
   for (size_t i = 0; i < pixels; i++) {
     // Where no hit was continued (sky), there is no tail to split, and
     // none of the variance shrinking gave it is the tail's.
@@ -1138,7 +1151,7 @@ trace_pixel_plan estimate_pixel_plan(const scene_data& scene, const scene_bvh& b
     auto best = std::max(params.split, 1);
     if (params.split == 0 && tail_cost[i] > 0) {
       auto best_product = std::numeric_limits<double>::max();
-      for (auto split = 1; split <= trace_max_split; split++) {
+      for (auto split = 1; split <= max_split; split++) {
         auto product = (hit + tail / split) * (1 + split * tail_cost[i]);
         if (product < best_product * (1 - 1e-9)) best = split, best_product = product;
       }
@@ -1159,7 +1172,7 @@ trace_pixel_plan estimate_pixel_plan(const scene_data& scene, const scene_bvh& b
   auto gain = deviations > 0 ? variances * costs / (deviations * deviations) : 1.0;
   plan.gain = std::isfinite(gain) ? (float)gain : 1.0f;
   plan.rates = allocate_stratified_rates(
-      hit_variance, variance, cost, params.samples, params.threads);
+      hit_variance, variance, cost, budget, params.samples, params.threads);
   return plan;
 }
 

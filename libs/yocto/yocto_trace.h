@@ -249,14 +249,17 @@ trace_pilot run_trace_pilot(const scene_data& scene, const scene_bvh& bvh,
 // its even and odd columns), so that a noise that is even across the image
 // is planned as even. A sample of the pixel then costs 1 + k c rays for k
 // paths per camera ray and has variance V_hit + V_tail / k; the split k
-// (1 ... 8, or params.split) minimises their product, the optimum of
+// (1 ... 8, at most the largest power of two dividing params.samples, or
+// params.split) minimises their product, the optimum of
 // splitting at the first vertex (as EARS, Rath et al. 2022, from the
 // pixel's own statistics). The rates minimise the image's mean squared
-// error for the cost of params.samples samples a pixel at each pixel's
-// split, with the camera hit's part of a pixel's error falling as n^-1.5
-// (Owen-scrambled nets on a 2D integrand with edges) and the rest as n^-1
-// (so that fibre edges against the sky, which the pilot's unstratified
-// pairs see as noisy, are not oversampled at high counts), and are rounded
+// error for the rays of params.samples uniform samples a pixel (no rates,
+// params.split or 1 path a camera ray: a render costs what one without the
+// plan costs, whatever it picks), with the camera hit's part of a pixel's
+// error falling as n^-1.5 (Owen-scrambled nets on a 2D integrand with
+// edges) and the rest as n^-1 (so that fibre edges against the sky, which
+// the pilot's unstratified pairs see as noisy, are not oversampled at high
+// counts), and are rounded
 // to integers from 1 to 16 or to 1 / q for q = 2, 4, 8 dividing
 // params.samples (so that every pixel takes whole paths).
 // splits: each pixel's k, empty when params.split sets every pixel's (it
