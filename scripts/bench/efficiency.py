@@ -171,7 +171,18 @@ def main():
                         help="with --before-reference-only: score against the cached reference "
                         "of this binary instead of --before's (the same image in expectation)")
     parser.add_argument("--commits", default="", help="'BEFORE AFTER' commit ids for the report")
+    parser.add_argument("--report-only", action="store_true",
+                        help="rewrite the report from --out's efficiency.csv, rendering nothing "
+                        "(give the arguments of the run that wrote it)")
     args = parser.parse_args()
+    if args.report_only:
+        with open(os.path.join(ROOT, args.out, "efficiency.csv"), newline="") as f:
+            rows = [{k: (v if k in ("scene", "variant", "runs") else
+                         int(v) if k == "spp" else float(v)) for k, v in row.items()}
+                    for row in csv.DictReader(f)]
+        binaries = {"before": args.before, "after": args.after}
+        write_report(args, rows, [], {k: file_hash(v) for k, v in binaries.items()})
+        return
     if args.quick:
         args.reference_spp, args.runs, args.headline_runs = 256, 1, 1
     binaries = {"before": os.path.abspath(args.before), "after": os.path.abspath(args.after)}
@@ -235,6 +246,26 @@ def main():
     write_report(args, rows, checks, hashes)
 
 
+def equal_cpu_gain(table, name, spp):
+    """The before render's MSE over the after binary's at the same CPU-s (see the report)."""
+    if (name, "before", spp) not in table:
+        return ""
+    points = sorted((math.log(r["cpu_seconds"]), math.log(r["mse"]))
+                    for k, r in table.items()
+                    if k[0] == name and k[1] == "after" and r["mse"] > 0 and r["cpu_seconds"] > 0)
+    if len(points) < 2 or table[(name, "before", spp)]["mse"] <= 0:
+        return ""
+    before = table[(name, "before", spp)]
+    x = math.log(before["cpu_seconds"])
+    inside = points[0][0] <= x <= points[-1][0]
+    segment = 0
+    while segment < len(points) - 2 and x > points[segment + 1][0]:
+        segment += 1
+    (x0, y0), (x1, y1) = points[segment], points[segment + 1]
+    mse = math.exp(y0 + (y1 - y0) * (x - x0) / (x1 - x0)) if x1 > x0 else math.exp(y0)
+    return f"{before['mse'] / mse:.2f} ({before['cpu_seconds']:.1f}){'' if inside else '*'}"
+
+
 def write_report(args, rows, checks, hashes):
     out = os.path.join(ROOT, args.out)
     os.makedirs(out, exist_ok=True)
@@ -289,6 +320,17 @@ def write_report(args, rows, checks, hashes):
                    f"{table[(name, 'after', 64)]['cpu_per_spp']:.3f}")
         lines.append(f"| {name} | " + " | ".join(gain(name, "after", "before", spp)
                                                  for spp in CHECKPOINTS) + f" | {cpu} |")
+    lines += ["", "## At equal CPU", "",
+              "A default that spends more CPU at the same `--samples` gains from its budget "
+              "alone (every estimator's efficiency grows with it under Sobol points). Here the "
+              "`after` binary's MSE at the `before` render's CPU-s, interpolated on log MSE "
+              "against log CPU-s between its own 16, 64 and 256-spp renders (* extrapolated "
+              "from the nearest two), over the `before` render's MSE: above 1 the new "
+              "default is more efficient at the same CPU.", "",
+              "| scene | 64 spp (before's CPU-s) | 256 spp (before's CPU-s) |", "|---|---:|---:|"]
+    for name in scenes:
+        cells = [equal_cpu_gain(table, name, spp) for spp in (64, 256)]
+        lines.append(f"| {name} | " + " | ".join(cells) + " |")
     lines += ["", "## Each lever's share at 64 spp", "",
               "Efficiency of the new default over the default with one lever turned back "
               "(above 1: the lever pays).", "",
