@@ -980,6 +980,15 @@ static void shrink_window_average(std::vector<double>& values, vec2i size, int r
     values[i] = coarse[i] + weight * ((even[i] + odd[i]) / 2 - coarse[i]);
 }
 
+// The fewest paths a pixel may take: one every q samples, q a power of two
+// that divides the sample count (up to 8), so that the render takes whole
+// paths in every pixel.
+static int max_sample_stride(int samples) {
+  auto every = 1;
+  while (every < 8 && samples % (every * 2) == 0) every *= 2;
+  return every;
+}
+
 // Paths a sample per pixel (see estimate_pixel_plan). A pixel's camera hit
 // is a 2D integrand with edges (fibres against the sky), whose variance
 // under Owen-scrambled nets falls as n^-1.5 (Owen 1997), the paths after
@@ -991,15 +1000,6 @@ static void shrink_window_average(std::vector<double>& values, vec2i size, int r
 // the pixels (bisection on log lambda). With a = 0 it is the allocation in
 // proportion to sqrt(b / c). Variances that are not finite give every pixel
 // a path a sample.
-// The fewest paths a pixel may take: one every q samples, q a power of two
-// that divides the sample count (up to 8), so that the render takes whole
-// paths in every pixel.
-static int max_sample_stride(int samples) {
-  auto every = 1;
-  while (every < 8 && samples % (every * 2) == 0) every *= 2;
-  return every;
-}
-
 static std::vector<float> allocate_stratified_rates(const std::vector<double>& hit,
     const std::vector<double>& variance, const std::vector<double>& cost, double budget,
     int samples, int threads) {
@@ -1130,8 +1130,9 @@ trace_pixel_plan estimate_pixel_plan(const scene_data& scene, const scene_bvh& b
   // no more than the fewest paths' stride q: a pixel at k paths a camera
   // ray and one camera ray every q samples then costs no more than a
   // uniform sample, so the budget below can always be met (no splits at an
-  // odd sample count). The buffers then hold each pixel's V_hit, variance and cost at that
-  // split (hit_variance held the variance of a hit's mean until then).
+  // odd sample count). The buffers then hold each pixel's V_hit, variance
+  // and cost at that split (hit_variance held the variance of a hit's mean
+  // until then).
   auto plan = trace_pixel_plan{};
   if (params.split == 0) plan.splits.assign(pixels, 1);
   // The budget is the rays of params.samples samples a pixel without the

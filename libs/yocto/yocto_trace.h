@@ -250,9 +250,9 @@ trace_pilot run_trace_pilot(const scene_data& scene, const scene_bvh& bvh,
 // is planned as even. A sample of the pixel then costs 1 + k c rays for k
 // paths per camera ray and has variance V_hit + V_tail / k; the split k
 // (1 ... 8, at most the largest power of two dividing params.samples, or
-// params.split) minimises their product, the optimum of
-// splitting at the first vertex (as EARS, Rath et al. 2022, from the
-// pixel's own statistics). The rates minimise the image's mean squared
+// params.split) minimises their product, the optimum of splitting at the
+// first vertex (as EARS, Rath et al. 2022, from the pixel's own
+// statistics). The rates minimise the image's mean squared
 // error for the rays of params.samples uniform samples a pixel (no rates,
 // params.split or 1 path a camera ray: a render costs what one without the
 // plan costs, whatever it picks), with the camera hit's part of a pixel's
