@@ -8,6 +8,7 @@
 
 #include <cmath>
 #include <limits>
+#include <map>
 #include <stdexcept>
 
 using namespace yocto;
@@ -1009,12 +1010,10 @@ TEST(trace, pixel_plan_predicts_its_gain_and_splits_where_the_tail_is_noisy) {
       // half or twice it. That rate is below 1 (1/4): the splits (about 7
       // paths a camera ray) are paid from uniform sampling's rays, and
       // rates below 1 are powers of 1/2, coarser steps than above.
-      auto common = plan.rates[0];
-      auto even   = std::count(plan.rates.begin(), plan.rates.end(), common);
-      for (auto rate : plan.rates) {
-        auto count = std::count(plan.rates.begin(), plan.rates.end(), rate);
-        if (count > even) common = rate, even = count;
-      }
+      auto counts = std::map<float, int>{};
+      for (auto rate : plan.rates) counts[rate]++;
+      auto [common, even] = *std::max_element(counts.begin(), counts.end(),
+          [](auto& a, auto& b) { return a.second < b.second; });
       std::printf("[ figure ] plan, the whole frame: %d of %d pixels at rate %g\n", (int)even,
           (int)plan.rates.size(), common);
       EXPECT_LT(common, 1.0f);

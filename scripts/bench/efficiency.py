@@ -175,18 +175,27 @@ def main():
                         help="rewrite the report from --out's efficiency.csv, rendering nothing "
                         "(give the arguments of the run that wrote it)")
     args = parser.parse_args()
+    if args.reference_binary and not args.before_reference_only:
+        sys.exit("--reference-binary needs --before-reference-only")
     if args.report_only:
         with open(os.path.join(ROOT, args.out, "efficiency.csv"), newline="") as f:
             rows = [{k: (v if k in ("scene", "variant", "runs") else
                          int(v) if k == "spp" else float(v)) for k, v in row.items()}
                     for row in csv.DictReader(f)]
         binaries = {"before": args.before, "after": args.after}
+        if args.reference_binary:
+            binaries["reference"] = args.reference_binary
         write_report(args, rows, [], {k: file_hash(v) for k, v in binaries.items()})
         return
     if args.quick:
         args.reference_spp, args.runs, args.headline_runs = 256, 1, 1
     binaries = {"before": os.path.abspath(args.before), "after": os.path.abspath(args.after)}
     hashes = {k: file_hash(v) for k, v in binaries.items()}
+    # Who made each reference: the binaries, or --reference-binary for `before`'s.
+    makers, maker_hashes = dict(binaries), dict(hashes)
+    if args.reference_binary:
+        makers["before"] = os.path.abspath(args.reference_binary)
+        maker_hashes["before"] = hashes["reference"] = file_hash(makers["before"])
     cache = os.path.join(ROOT, "out/bench/efficiency")
     os.makedirs(cache, exist_ok=True)
     os.chdir(ROOT)
@@ -198,12 +207,7 @@ def main():
         log(f"{name}: references at {resolution} px")
         quarter = args.reference_spp // 4
         tags = ["before"] if args.before_reference_only else ["before", "after"]
-        makers = dict(binaries)
-        if args.reference_binary:
-            if not args.before_reference_only:
-                sys.exit("--reference-binary needs --before-reference-only")
-            makers["before"] = os.path.abspath(args.reference_binary)
-        refs = {tag: reference(makers[tag], file_hash(makers[tag]), name, scene, resolution,
+        refs = {tag: reference(makers[tag], maker_hashes[tag], name, scene, resolution,
                                quarter, [seed + 100 * (i + 1) for seed in range(1, 5)], 0, cache)
                 for i, tag in enumerate(tags)}
         if args.before_reference_only:
@@ -286,7 +290,7 @@ def write_report(args, rows, checks, hashes):
              f"Every render: 31 bounces, no clamp, seed 1, {args.threads} threads; CPU seconds "
              f"of the render (all threads, load and BVH build excluded), median of "
              f"{args.headline_runs} runs for `before` and `after`, {args.runs} for the others. MSE against "
-             + ((f"the reference of an earlier binary ({file_hash(args.reference_binary)})"
+             + ((f"the reference of an earlier binary ({hashes['reference']})"
                  if args.reference_binary else "the `before` binary's reference")
                 if args.before_reference_only else "the mean of both binaries' references")
              + f" ({args.reference_spp} spp each, as four renders of different seeds), minus the "
