@@ -196,6 +196,8 @@ static std::string render_settings(const scene_data& scene, const trace_params& 
   if (params.aovs) line("aovs", "1");
   line("adaptive", trace_adaptive_names[(int)params.adaptive]);
   line("allocation", params.allocation ? "learned" : "off");
+  // Only when off, so that the settings of default renders stay as they were.
+  if (!params.roulette_cache) line("roulette_cache", "off");
   line("hair", std::string(params.hair_sampling.four_numbers ? "four-numbers" : "demux") +
                    (params.hair_sampling.per_hit ? " per-hit" : "") +
                    (params.hair_sampling.mixture_weight ? " mixture-weight" : "") +
@@ -476,6 +478,10 @@ CLI::App* add_render_command(CLI::App& app, render_command& command, std::string
       "shadow rays per region of the scene from the visibility the pilot measured there "
       "(EARS/MARS: each light sample cast with the probability that maximises efficiency, "
       "the default), or the roulette of --shadow-threshold");
+  render->add_flag("--roulette-cache,!--no-roulette-cache", params.roulette_cache,
+      "Russian roulette by region and direction from the tails the pilot measured there "
+      "(EARS: each path survives with the probability that maximises efficiency, the "
+      "default), or the pilot's one threshold everywhere");
   render->add_option("--shadow-threshold", params.shadow_threshold,
           "light samples that would add less than this play a roulette for their shadow ray")
       ->check(CLI::NonNegativeNumber);

@@ -299,13 +299,26 @@ static sequence_state make_pixel_sequence(const trace_context& context,
 }
 
 // A point where a pilot path played the roulette: the throughput's largest
-// component, the probability of surviving, and the radiance gathered and
-// rays cast before it (the path's tail is what comes after).
+// component, the probability of surviving, the radiance gathered and rays
+// cast before it (the path's tail is what comes after), and the vertex and
+// the direction the tail leaves it in.
 struct trace_roulette_point {
-  float   weight  = 0;
-  float   survive = 1;
-  vec3f   radiance = {0, 0, 0};
-  int64_t rays    = 0;
+  float   weight    = 0;
+  float   survive   = 1;
+  vec3f   radiance  = {0, 0, 0};
+  int64_t rays      = 0;
+  vec3f   position  = {0, 0, 0};
+  vec3f   direction = {0, 0, 0};
+};
+
+// A pilot's tail for the roulette cache: where it left from, in which
+// direction, and its squared radiance per unit throughput and its rays, each
+// already weighted by the pilot's own roulette.
+struct trace_tail_record {
+  vec3f position  = {0, 0, 0};
+  vec3f direction = {0, 0, 0};
+  float moment    = 0;
+  float cost      = 0;
 };
 
 // A shadow ray a pilot path cast: the point it left and whether it reached
@@ -346,16 +359,44 @@ struct trace_walk {
   std::vector<trace_shadow_record>*  shadows         = nullptr;
   const trace_allocation*            allocation      = nullptr;
   trace_tally*                       tally           = nullptr;
+  const trace_roulette_cache*        roulette        = nullptr;
 };
 
-int find_allocation_cell(const trace_allocation& allocation, const vec3f& position) {
-  auto& cells = allocation.cells;
+// The cell of a grid (bounds, cells per axis, cells per unit length) that
+// holds a point, the nearest for points outside; -1 without a grid.
+static int find_grid_cell(
+    const bbox3f& bounds, const vec3i& cells, const vec3f& cell_scale, const vec3f& position) {
   if (cells.x <= 0) return -1;
-  auto local = (position - allocation.bounds.min) * allocation.cell_scale;
+  auto local = (position - bounds.min) * cell_scale;
   if (!isfinite(local)) return -1;
   auto i = std::clamp((int)local.x, 0, cells.x - 1), j = std::clamp((int)local.y, 0, cells.y - 1),
        k = std::clamp((int)local.z, 0, cells.z - 1);
   return (k * cells.y + j) * cells.x + i;
+}
+
+int find_allocation_cell(const trace_allocation& allocation, const vec3f& position) {
+  return find_grid_cell(allocation.bounds, allocation.cells, allocation.cell_scale, position);
+}
+
+int find_roulette_cell(const trace_roulette_cache& cache, const vec3f& position) {
+  return find_grid_cell(cache.bounds, cache.cells, cache.cell_scale, position);
+}
+
+float roulette_survival(const trace_roulette_cache& cache, const vec3f& position,
+    const vec3f& direction, float weight) {
+  auto cell = find_roulette_cell(cache, position);
+  if (cell < 0 || !(weight > 0)) return std::min(std::max(weight, 0.0f), 1.0f);
+  auto& tail   = cache.tails[cell];
+  auto  moment = tail[0] + tail[1] * direction.x + tail[2] * direction.y + tail[3] * direction.z;
+  auto  cost   = tail[4] + tail[5] * direction.x + tail[6] * direction.y + tail[7] * direction.z;
+  // The fits are kept positive where they were made (see
+  // make_roulette_cache); a tail costs at least its next ray.
+  moment = std::max(moment, 0.0f), cost = std::max(cost, 1.0f);
+  auto survive = weight * std::sqrt(moment / cost) / cache.pixel_deviation;
+  // As the global threshold's clamp: never below the throughput itself,
+  // nor above 16 times it.
+  survive = std::clamp(survive, weight, 16 * weight);
+  return std::isfinite(survive) ? std::min(survive, 1.0f) : std::min(weight, 1.0f);
 }
 
 static scene_intersection cast_closest(const trace_walk& walk, const ray3f& ray) {
@@ -379,7 +420,7 @@ static scene_intersection cast_closest(const trace_walk& walk, const ray3f& ray)
 static void scatter_path(const trace_walk& walk, material_point point, ray3f ray, int bounce,
     vec3f weight, sequence_state& sequence, vec3f& radiance, vec3f* lobes = nullptr) {
   auto& [scene, bvh, context, params, threshold, rays, record, points, shadows, allocation,
-      tally] = walk;
+      tally, roulette] = walk;
   auto use_mis = params.sampler == trace_sampler_type::path;
   // Next-event estimation, when there are lights to sample; MIS weighs the
   // BSDF samples that find lights with area, so only then is a BSDF pdf
@@ -494,9 +535,13 @@ static void scatter_path(const trace_walk& walk, material_point point, ray3f ray
     // pilot's): they survive with probability throughput / threshold and are
     // weighted up when they do (unbiased). A path that carries all of its
     // energy (a white fiber) would gain variance and nothing else.
-    auto survive = max_component(weight) / threshold;
+    auto survive = roulette ? roulette_survival(*roulette, point.position, incoming,
+                                  max_component(weight))
+                            : max_component(weight) / threshold;
     if (bounce >= params.roulette_bounce) {
-      if (points) points->push_back({max_component(weight), std::min(survive, 1.0f), radiance, rays});
+      if (points)
+        points->push_back({max_component(weight), std::min(survive, 1.0f), radiance, rays,
+            point.position, incoming});
       if (survive < 1) {
         if (lobe_roulette.y >= survive) break;
         weight /= survive;
@@ -719,6 +764,7 @@ void init_trace_state(trace_state& state, const scene_data& scene, const trace_p
   state.splits.clear();
   state.split      = 0;
   state.allocation = {};
+  state.roulette_cache = {};
   state.vertices = 0, state.light_samples = 0, state.shadow_rays = 0;
   state.paths = 0, state.continuations = 0;
 }
@@ -788,6 +834,95 @@ static trace_allocation make_trace_allocation(
   return allocation;
 }
 
+// Solves the 4 x 4 system a x = b (symmetric positive definite: a ridge
+// fit's) by Cholesky; false if it is not.
+static bool solve_ridge_system(std::array<double, 16> a, std::array<double, 4>& b) {
+  for (auto k = 0; k < 4; k++) {
+    for (auto m = 0; m < k; m++) a[k * 4 + k] -= a[k * 4 + m] * a[k * 4 + m];
+    if (!(a[k * 4 + k] > 0)) return false;
+    a[k * 4 + k] = std::sqrt(a[k * 4 + k]);
+    for (auto i = k + 1; i < 4; i++) {
+      for (auto m = 0; m < k; m++) a[i * 4 + k] -= a[i * 4 + m] * a[k * 4 + m];
+      a[i * 4 + k] /= a[k * 4 + k];
+    }
+  }
+  for (auto i = 0; i < 4; i++) {  // L y = b
+    for (auto m = 0; m < i; m++) b[i] -= a[i * 4 + m] * b[m];
+    b[i] /= a[i * 4 + i];
+  }
+  for (auto i = 3; i >= 0; i--) {  // L^T x = y
+    for (auto m = i + 1; m < 4; m++) b[i] -= a[m * 4 + i] * b[m];
+    b[i] /= a[i * 4 + i];
+  }
+  return true;
+}
+
+// The roulette cache from the pilot's tails (see trace_roulette_cache): a
+// grid of cells of about 1,024 tails each on average (at most 16 a side);
+// in each cell, M2 and c fitted as a + b . d by least squares with a ridge
+// of 16 tails' weight towards the whole scene's means (a = mean, b = 0), so
+// that a cell of few tails keeps near them.
+static trace_roulette_cache make_roulette_cache(
+    const std::vector<std::vector<trace_tail_record>>& rows, double pixel_deviation,
+    double scene_moment, double scene_cost) {
+  auto cache  = trace_roulette_cache{};
+  auto bounds = bbox3f{};
+  auto count  = (size_t)0;
+  for (auto& row : rows) {
+    for (auto& tail : row) {
+      if (!isfinite(tail.position)) continue;
+      bounds = merge(bounds, tail.position);
+      count++;
+    }
+  }
+  if (count == 0 || !(pixel_deviation > 0) || !std::isfinite(pixel_deviation) ||
+      !(scene_moment > 0) || !(scene_cost > 0))
+    return cache;
+  auto extent = max(bounds.max - bounds.min, vec3f{1e-6f, 1e-6f, 1e-6f});
+  extent      = max(extent, vec3f{1, 1, 1} * (max_component(extent) * 1e-3f));
+  auto target = std::max((double)count / 1024, 1.0);
+  auto side   = std::cbrt((double)extent.x * extent.y * extent.z / target);
+  auto cells  = vec3i{0, 0, 0};
+  for (auto a = 0; a < 3; a++) cells[a] = std::clamp((int)std::ceil(extent[a] / side), 1, 16);
+  cache.bounds          = bounds;
+  cache.cells           = cells;
+  cache.cell_scale      = vec3f(cells) / extent;
+  cache.pixel_deviation = (float)pixel_deviation;
+  auto ncells  = (size_t)cells.x * cells.y * cells.z;
+  // Per cell: X^T X (4 x 4) and X^T y for the two fits, X = (1, d).
+  auto normal  = std::vector<std::array<double, 16>>(ncells);
+  auto targets = std::vector<std::array<double, 8>>(ncells);
+  for (auto& row : rows) {
+    for (auto& tail : row) {
+      auto cell = find_roulette_cell(cache, tail.position);
+      if (cell < 0) continue;
+      auto x = std::array<double, 4>{1, tail.direction.x, tail.direction.y, tail.direction.z};
+      for (auto i = 0; i < 4; i++) {
+        for (auto k = 0; k < 4; k++) normal[cell][i * 4 + k] += x[i] * x[k];
+        targets[cell][i] += x[i] * tail.moment;
+        targets[cell][4 + i] += x[i] * tail.cost;
+      }
+    }
+  }
+  auto ridge = 16.0;
+  cache.tails.resize(ncells);
+  for (size_t cell = 0; cell < ncells; cell++) {
+    auto a = normal[cell];
+    for (auto i = 0; i < 4; i++) a[i * 4 + i] += ridge;
+    auto moment = std::array<double, 4>{targets[cell][0] + ridge * scene_moment, targets[cell][1],
+        targets[cell][2], targets[cell][3]};
+    auto cost = std::array<double, 4>{targets[cell][4] + ridge * scene_cost, targets[cell][5],
+        targets[cell][6], targets[cell][7]};
+    if (!solve_ridge_system(a, moment) || !solve_ridge_system(a, cost))
+      moment = {scene_moment, 0, 0, 0}, cost = {scene_cost, 0, 0, 0};
+    for (auto i = 0; i < 4; i++) {
+      cache.tails[cell][i]     = (float)moment[i];
+      cache.tails[cell][4 + i] = (float)cost[i];
+    }
+  }
+  return cache;
+}
+
 // The roulette threshold of a render, from a pilot: Rath et al. 2022
 // (Efficiency-Aware Russian Roulette and Splitting, EARS) give a path of
 // throughput w the survival probability q = w sqrt(E[L^2] / c) /
@@ -822,8 +957,10 @@ trace_pilot run_trace_pilot(const scene_data& scene, const scene_bvh& bvh,
   // rays, samples, tail second moment, tail rays and roulette points; added
   // in row order.
   auto rows = std::vector<std::array<double, 7>>(ny);
-  // Per grid row, with params.allocation: the shadow rays cast.
+  // Per grid row, with params.allocation: the shadow rays cast; with
+  // params.roulette_cache: the tails.
   auto row_shadows = std::vector<std::vector<trace_shadow_record>>(params.allocation ? ny : 0);
+  auto row_tails   = std::vector<std::vector<trace_tail_record>>(params.roulette_cache ? ny : 0);
   parallel_chunks(ny, 1, params.threads, [&](int64_t begin, int64_t end) {
     auto points = std::vector<trace_roulette_point>{};
     auto rays   = (int64_t)0;
@@ -834,6 +971,7 @@ trace_pilot run_trace_pilot(const scene_data& scene, const scene_bvh& bvh,
       auto& sums = rows[row];
       sums       = {};
       shadows.clear();
+      auto tails = std::vector<trace_tail_record>{};
       auto j     = std::min((int)row * stride + stride / 2, size.y - 1);
       for (auto column = 0; column < nx; column++) {
         auto i     = std::min(column * stride + stride / 2, size.x - 1);
@@ -862,10 +1000,14 @@ trace_pilot run_trace_pilot(const scene_data& scene, const scene_bvh& bvh,
               // weighted by the inverse probability of having survived it
               // (zero if it did not).
               if (!(point.weight > 0) || !(point.survive > 0)) continue;
-              auto tail = glm::dvec3(radiance - point.radiance) / (double)point.weight;
-              sums[4] += point.survive * (tail.x * tail.x + tail.y * tail.y + tail.z * tail.z) / 3;
-              sums[5] += (double)(rays - point.rays) / point.survive;
+              auto tail   = glm::dvec3(radiance - point.radiance) / (double)point.weight;
+              auto moment = point.survive * glm::dot(tail, tail) / 3;
+              auto cost   = (double)(rays - point.rays) / point.survive;
+              sums[4] += moment;
+              sums[5] += cost;
               sums[6] += 1;
+              if (params.roulette_cache && std::isfinite(moment) && std::isfinite(cost))
+                tails.push_back({point.position, point.direction, (float)moment, (float)cost});
             }
           }
           means[set] = set_sum / (double)pilot_samples;
@@ -875,6 +1017,7 @@ trace_pilot run_trace_pilot(const scene_data& scene, const scene_bvh& bvh,
         sums[1] += 1;
       }
       if (params.allocation) row_shadows[row] = shadows;
+      if (params.roulette_cache) row_tails[row] = std::move(tails);
     }
   });
   auto totals = std::array<double, 7>{};
@@ -893,6 +1036,9 @@ trace_pilot run_trace_pilot(const scene_data& scene, const scene_bvh& bvh,
   if (params.allocation)
     pilot_result.allocation =
         make_trace_allocation(row_shadows, std::sqrt(pixel_variance / pixel_cost));
+  if (params.roulette_cache)
+    pilot_result.roulette_cache = make_roulette_cache(
+        row_tails, std::sqrt(pixel_variance / pixel_cost), tail_moment, tail_cost);
   return pilot_result;
 }
 
@@ -1079,7 +1225,7 @@ static std::vector<float> allocate_stratified_rates(const std::vector<double>& h
 // pixel the split and the rates.
 trace_pixel_plan estimate_pixel_plan(const scene_data& scene, const scene_bvh& bvh,
     const trace_context& context, const trace_params& params, float roulette_threshold,
-    const trace_allocation* allocation) {
+    const trace_allocation* allocation, const trace_roulette_cache* roulette_cache) {
   auto  size   = camera_resolution(scene.cameras[params.camera], params.resolution);
   auto& camera = scene.cameras[params.camera];
   auto  pixels = (size_t)size.x * size.y;
@@ -1088,8 +1234,8 @@ trace_pixel_plan estimate_pixel_plan(const scene_data& scene, const scene_bvh& b
   auto  seed = hash_uint64(params.seed ^ 0x7261746573ULL);  // "rates"
   parallel_chunks(size.y, 1, params.threads, [&](int64_t begin, int64_t end) {
     auto rays = (int64_t)0;
-    auto walk = trace_walk{
-        scene, bvh, context, params, roulette_threshold, rays, nullptr, nullptr, nullptr, allocation};
+    auto walk = trace_walk{scene, bvh, context, params, roulette_threshold, rays, nullptr, nullptr,
+        nullptr, allocation, nullptr, roulette_cache};
     for (auto j = (int)begin; j < (int)end; j++) {
       for (auto i = 0; i < size.x; i++) {
         if (!pilot_measures(i, j)) continue;
@@ -1202,7 +1348,7 @@ static bool trace_rows(trace_state& state, const scene_data& scene, const scene_
     auto tally  = trace_tally{};
     auto walk   = trace_walk{scene, bvh, context, params, state.roulette_threshold, rays,
         record, nullptr, nullptr, state.allocation.cells.x > 0 ? &state.allocation : nullptr,
-        &tally};
+        &tally, state.roulette_cache.cells.x > 0 ? &state.roulette_cache : nullptr};
     for (auto i = 0; i < state.width; i++) {
       auto pixel = j * state.width + i;
       auto& sum  = state.sums[pixel];
@@ -1314,9 +1460,13 @@ static void init_roulette_threshold(trace_state& state, const scene_data& scene,
                                                            : pilot.roulette_threshold;
   state.allocation = pilot.allocation;
   auto allocation  = state.allocation.cells.x > 0 ? &state.allocation : nullptr;
-  state.split      = std::max(params.split, 1);
+  // A threshold the user set holds everywhere.
+  if (params.roulette_threshold <= 0) state.roulette_cache = pilot.roulette_cache;
+  auto roulette = state.roulette_cache.cells.x > 0 ? &state.roulette_cache : nullptr;
+  state.split   = std::max(params.split, 1);
   if (params.adaptive == trace_adaptive_type::off) return;
-  auto plan = estimate_pixel_plan(scene, bvh, context, params, state.roulette_threshold, allocation);
+  auto plan = estimate_pixel_plan(
+      scene, bvh, context, params, state.roulette_threshold, allocation, roulette);
   state.rates         = std::move(plan.rates);
   state.splits        = std::move(plan.splits);
   state.adaptive_gain = plan.gain;

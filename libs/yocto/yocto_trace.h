@@ -94,6 +94,10 @@ struct trace_params {
   // Shadow rays allocated per region of the scene by what the pilot learned
   // (see trace_allocation); off: params.shadow_threshold's roulette.
   bool               allocation = true;
+  // Russian roulette by region and direction from the pilot's tails (see
+  // trace_roulette_cache) when the threshold is the pilot's; off: the
+  // pilot's one threshold everywhere.
+  bool               roulette_cache = true;
 };
 
 }  // namespace yocto
@@ -162,6 +166,32 @@ struct trace_allocation {
 // bounds take the nearest cell); -1 without a grid.
 int find_allocation_cell(const trace_allocation& allocation, const vec3f& position);
 
+// Russian roulette per region and direction (Rath et al. 2022, EARS): a path
+// of throughput w leaving a vertex at x in direction d survives with
+// probability q = w sqrt(M2(x, d) / c(x, d)) / sqrt(V / C) (at most 1), M2 and
+// c the second moment (per unit throughput) and the cost in rays of the
+// radiance its tail brings, V and C a pixel sample's variance and cost. A
+// tail that leads out of the hair towards the light is worth more than one
+// that leads into it, wherever the hair is: M2 and c are linear functions of
+// d in each cell of a grid over the pilot's vertices (least squares over the
+// pilot's tails, each cell's fit drawn towards the whole scene's mean).
+struct trace_roulette_cache {
+  bbox3f             bounds          = {};
+  vec3i              cells           = {0, 0, 0};  // per axis; 0 for no grid
+  vec3f              cell_scale      = {0, 0, 0};  // cells per unit length
+  float              pixel_deviation = 0;          // sqrt(V / C)
+  // Per cell: M2 = a + b . d (a, b.x, b.y, b.z), then c the same way.
+  std::vector<std::array<float, 8>> tails = {};
+};
+
+// The cell of a point in the cache's grid, as find_allocation_cell.
+int find_roulette_cell(const trace_roulette_cache& cache, const vec3f& position);
+
+// The survival probability of a path of throughput `weight` leaving
+// `position` in `direction` (see trace_roulette_cache), in (0, 1].
+float roulette_survival(const trace_roulette_cache& cache, const vec3f& position,
+    const vec3f& direction, float weight);
+
 // The image being rendered: sums of samples per pixel and counters.
 // The render so far: samples first ... first + samples - 1 of every pixel,
 // summed exactly (fixed_sum3), so that the sums of disjoint sample ranges,
@@ -191,6 +221,9 @@ struct trace_state {
   int                        split = 0;
   // The shadow rays' allocation (params.allocation; no cells until set).
   trace_allocation           allocation = {};
+  // The roulette by region and direction (params.roulette_cache; no cells
+  // until set).
+  trace_roulette_cache       roulette_cache = {};
   // What paths did: scattering vertices, light samples there that would
   // add light if visible, and the shadow rays cast for them.
   std::atomic<int64_t>       vertices      = 0;
@@ -232,8 +265,9 @@ float estimate_roulette_threshold(const scene_data& scene, const scene_bvh& bvh,
 // What the roulette's pilot measures: the threshold above and, with
 // params.allocation, the shadow rays' allocation.
 struct trace_pilot {
-  float            roulette_threshold = 1;
-  trace_allocation allocation         = {};  // with params.allocation
+  float                roulette_threshold = 1;
+  trace_allocation     allocation         = {};  // with params.allocation
+  trace_roulette_cache roulette_cache     = {};  // with params.roulette_cache
 };
 trace_pilot run_trace_pilot(const scene_data& scene, const scene_bvh& bvh,
     const trace_context& context, const trace_params& params);
@@ -274,7 +308,8 @@ struct trace_pixel_plan {
 };
 trace_pixel_plan estimate_pixel_plan(const scene_data& scene, const scene_bvh& bvh,
     const trace_context& context, const trace_params& params, float roulette_threshold,
-    const trace_allocation* allocation = nullptr);
+    const trace_allocation* allocation = nullptr,
+    const trace_roulette_cache* roulette_cache = nullptr);
 
 // Empty sums for the camera's image; the samples will start at `first`.
 void init_trace_state(trace_state& state, const scene_data& scene, const trace_params& params,
