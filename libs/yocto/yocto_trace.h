@@ -68,7 +68,7 @@ struct trace_params {
   int                sobol_bounces = 32;  // bounces with Sobol numbers, then independent
   int                samples    = 64;
   int                bounces    = 32;    // scattering events per path (pbrt maxdepth)
-  int                roulette_bounce = 1;  // first bounce with Russian roulette
+  int                roulette_bounce = 0;  // first bounce with Russian roulette
   // Paths whose throughput falls below this play the roulette; 0 for the
   // render's own, estimated by a pilot (estimate_roulette_threshold).
   float              roulette_threshold = 0;
