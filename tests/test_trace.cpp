@@ -788,6 +788,10 @@ TEST(trace, roulette_cache_keeps_the_mean_and_saves_rays) {
   init_trace_state(state, scene, params);
   trace_samples(state, scene, bvh, context, params, 1);
   EXPECT_GT(state.roulette_cache.cells.x, 0);
+  // The tally of what the roulette did (--stats).
+  EXPECT_GT(state.roulette_ends, 0);
+  EXPECT_LT(state.roulette_ends, state.roulette_plays);
+  EXPECT_LT(state.roulette_plays, state.vertices);
 }
 
 TEST(trace, roulette_threshold_is_checked) {

@@ -201,7 +201,8 @@ std::string format_render_stats(const render_session& session) {
       "bvh_build_peak_bytes=%lld curve_pieces=%zu width=%d height=%d spp=%d "
       "render_seconds=%.6f render_cpu=%.6f rays=%lld peak_memory=%lld clamped=%lld "
       "clamped_energy=%.6g roulette_threshold=%.6g adaptive=%d adaptive_gain=%.4g split=%.4g "
-      "allocation_cells=%d vertices=%lld light_samples=%lld shadow_rays=%lld",
+      "allocation_cells=%d vertices=%lld light_samples=%lld shadow_rays=%lld "
+      "roulette_cells=%d roulette_plays=%lld roulette_ends=%lld",
       session.load_seconds, bvh.build_seconds, (long long)bvh.peak_memory, segments,
       (long long)bvh.build_peak_memory, pieces, state.width, state.height, state.samples,
       session.seconds, session.cpu_seconds, (long long)state.rays.load(),
@@ -211,7 +212,9 @@ std::string format_render_stats(const render_session& session) {
       state.paths > 0 ? (double)state.continuations / (double)state.paths : (double)state.split,
       state.allocation.cells.x * state.allocation.cells.y * state.allocation.cells.z,
       (long long)state.vertices.load(), (long long)state.light_samples.load(),
-      (long long)state.shadow_rays.load());
+      (long long)state.shadow_rays.load(),
+      state.roulette_cache.cells.x * state.roulette_cache.cells.y * state.roulette_cache.cells.z,
+      (long long)state.roulette_plays.load(), (long long)state.roulette_ends.load());
   return buffer;
 }
 

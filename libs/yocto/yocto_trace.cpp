@@ -331,6 +331,7 @@ struct trace_shadow_record {
 // What paths did on a row of the image (see trace_state).
 struct trace_tally {
   int64_t vertices = 0, light_samples = 0, shadow_rays = 0, paths = 0, continuations = 0;
+  int64_t roulette_plays = 0, roulette_ends = 0;
 };
 
 // The camera ray of a sample of pixel (i, j) of a width x height image; the
@@ -543,7 +544,11 @@ static void scatter_path(const trace_walk& walk, material_point point, ray3f ray
         points->push_back({max_component(weight), std::min(survive, 1.0f), radiance, rays,
             point.position, incoming});
       if (survive < 1) {
-        if (lobe_roulette.y >= survive) break;
+        if (tally) tally->roulette_plays++;
+        if (lobe_roulette.y >= survive) {
+          if (tally) tally->roulette_ends++;
+          break;
+        }
         weight /= survive;
       }
     }
@@ -767,6 +772,7 @@ void init_trace_state(trace_state& state, const scene_data& scene, const trace_p
   state.roulette_cache = {};
   state.vertices = 0, state.light_samples = 0, state.shadow_rays = 0;
   state.paths = 0, state.continuations = 0;
+  state.roulette_plays = 0, state.roulette_ends = 0;
 }
 
 // Runs f(begin, end) over [0, size) in chunks on `threads` threads (0 for
@@ -1425,6 +1431,8 @@ static bool trace_rows(trace_state& state, const scene_data& scene, const scene_
     state.shadow_rays += tally.shadow_rays;
     state.paths += tally.paths;
     state.continuations += tally.continuations;
+    state.roulette_plays += tally.roulette_plays;
+    state.roulette_ends += tally.roulette_ends;
     state.nonfinite += nonfinite;
     state.clamped += clamped;
     state.row_energy[j] += energy;

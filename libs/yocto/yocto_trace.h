@@ -232,6 +232,10 @@ struct trace_state {
   // Camera paths traced, and the paths that continued them (with the split).
   std::atomic<int64_t>       paths         = 0;
   std::atomic<int64_t>       continuations = 0;
+  // Vertices where the roulette could end a path (survival below 1), and
+  // the paths it ended.
+  std::atomic<int64_t>       roulette_plays = 0;
+  std::atomic<int64_t>       roulette_ends  = 0;
   // Paths per sample of each pixel with adaptive sampling (empty until set,
   // and without it): an integer m >= 1 (m paths, each weighing 1 / m), or 1 / q
   // for q a power of two (one path every q samples, weighing q).
