@@ -206,6 +206,8 @@ static std::vector<fixed_sum3> add_up_parts(const scene_data& scene, const scene
     EXPECT_TRUE(state.rates == whole.rates) << part.front();
     EXPECT_TRUE(state.allocation.visibility == whole.allocation.visibility) << part.front();
     EXPECT_EQ(state.allocation.pixel_deviation, whole.allocation.pixel_deviation);
+    EXPECT_TRUE(state.roulette_cache.tails == whole.roulette_cache.tails) << part.front();
+    EXPECT_EQ(state.roulette_cache.pixel_deviation, whole.roulette_cache.pixel_deviation);
     for (size_t i = 0; i < added.size(); i++) add_fixed(added[i], state.sums[i]);
   }
   return added;
@@ -280,11 +282,12 @@ TEST(merge, renders_with_shadow_allocation_of_ranges_add_up_to_one_render) {
   EXPECT_EQ(off.allocation.cells.x, 0);
 }
 
-// The default plan (adaptive rates and each pixel's split): 16 samples at
-// once equal, bit for bit, the exact sums of the parts 0:3, 3:5:9 (two
-// calls) and 9:16 on 1 or 2 threads: every part's pilot finds the render's
-// rates and splits, and a pixel's paths are numbered by sample whatever the
-// range; the merged sums over 16 give the image.
+// The default plan (adaptive rates, each pixel's split and the roulette
+// cache): 16 samples at once equal, bit for bit, the exact sums of the parts
+// 0:3, 3:5:9 (two calls) and 9:16 on 1 or 2 threads: every part's pilots
+// find the render's rates, splits and roulette cache, and a pixel's paths
+// are numbered by sample whatever the range; the merged sums over 16 give
+// the image.
 TEST(merge, adaptive_renders_of_ranges_add_up_to_one_render) {
   auto scene = make_small_hair_scene();
   auto bvh   = scene_bvh{};
@@ -302,6 +305,8 @@ TEST(merge, adaptive_renders_of_ranges_add_up_to_one_render) {
   ASSERT_FALSE(whole.rates.empty());
   ASSERT_EQ(whole.splits.size(), whole.sums.size());
   EXPECT_GT(*std::max_element(whole.splits.begin(), whole.splits.end()), 1);
+  EXPECT_GT(whole.roulette_cache.cells.x, 0);
+  EXPECT_GT(whole.roulette_plays, 0);
   auto added = add_up_parts(scene, bvh, context, params, {{0, 3}, {3, 5, 9}, {9, 16}}, whole);
   EXPECT_TRUE(added == whole.sums);
   EXPECT_TRUE(get_image(whole).pixels ==
