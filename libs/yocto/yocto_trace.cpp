@@ -531,11 +531,12 @@ static void scatter_path(const trace_walk& walk, material_point point, ray3f ray
       lobe_mark   = radiance;
     }
 
-    // Russian roulette from params.roulette_bounce on, only on paths whose
-    // throughput fell below the render's threshold (the parameter's or the
-    // pilot's): they survive with probability throughput / threshold and are
-    // weighted up when they do (unbiased). A path that carries all of its
-    // energy (a white fiber) would gain variance and nothing else.
+    // Russian roulette from params.roulette_bounce on: a path survives with
+    // the roulette cache's probability for where it is and where it goes
+    // or, without one, throughput / threshold (the parameter's or the
+    // pilot's), and is weighted up when it does (unbiased). Either is at
+    // least the throughput: a path that carries all of its energy (a white
+    // fiber) would gain variance and nothing else.
     auto survive = roulette ? roulette_survival(*roulette, point.position, incoming,
                                   max_component(weight))
                             : max_component(weight) / threshold;
@@ -943,6 +944,8 @@ static trace_roulette_cache make_roulette_cache(
 // scenes); the spread of the two sets' means gives V as the render's
 // stratified numbers make it. The tails are those of the pilot's own
 // roulette, each weighted by the inverse of its survival probability. With
+// params.roulette_cache, the same tails, with where they left from and in
+// which direction, give the roulette cache (see make_roulette_cache); with
 // params.allocation, its shadow rays give the allocation's visibility (see
 // make_trace_allocation).
 trace_pilot run_trace_pilot(const scene_data& scene, const scene_bvh& bvh,

@@ -12,12 +12,13 @@
 // sample index): images do not depend on the number of threads, and any
 // range of samples renders alone.
 //
-// Paths end by Russian roulette once their throughput falls below a
-// threshold that a pilot chooses per render for the image's efficiency
-// (Rath et al. 2022, EARS, with one global estimate of each term: see
-// estimate_roulette_threshold); the pilot is a pure function of the scene,
-// the parameters and the seed, so every part of a split render finds the same
-// threshold. The same pilot learns, per region of the scene, how often a
+// Paths end by Russian roulette with the survival probability that
+// maximises the image's efficiency (Rath et al. 2022, EARS): a pilot
+// measures the pixel samples' variance and cost for the image, and the
+// tails' worth and cost per region of the scene and direction (see
+// trace_roulette_cache); the pilot is a pure function of the scene, the
+// parameters and the seed, so every part of a split render learns the same.
+// The same pilot learns, per region of the scene, how often a
 // shadow ray reaches its light, and light samples cast their shadow ray with
 // the probability that maximises efficiency (see trace_allocation). Where no
 // MIS weight needs a BSDF pdf (no light with area to sample: a constant sky,
