@@ -347,7 +347,9 @@ static ray3f sample_camera_ray(const camera_data& camera, int i, int j, int widt
 // What every vertex of a path needs: the scene, its BVH and lights, the
 // parameters, the roulette threshold, the ray counter and, when not null,
 // the list of rays cast, (pilot paths) the roulette points met and shadow
-// rays cast, the shadow rays' allocation and the tally of what paths did.
+// rays cast, the shadow rays' allocation, the tally of what paths did and
+// the roulette cache (which, when set, decides the roulette instead of the
+// threshold).
 struct trace_walk {
   const scene_data&                  scene;
   const scene_bvh&                   bvh;
@@ -390,8 +392,8 @@ float roulette_survival(const trace_roulette_cache& cache, const vec3f& position
   auto& tail   = cache.tails[cell];
   auto  moment = tail[0] + tail[1] * direction.x + tail[2] * direction.y + tail[3] * direction.z;
   auto  cost   = tail[4] + tail[5] * direction.x + tail[6] * direction.y + tail[7] * direction.z;
-  // The fits are kept positive where they were made (see
-  // make_roulette_cache); a tail costs at least its next ray.
+  // A linear fit may fall below zero towards directions its cell's tails
+  // rarely took: no worth there; and a tail costs at least its next ray.
   moment = std::max(moment, 0.0f), cost = std::max(cost, 1.0f);
   auto survive = weight * std::sqrt(moment / cost) / cache.pixel_deviation;
   // As the global threshold's clamp: never below the throughput itself,
