@@ -799,30 +799,43 @@ static void parallel_chunks(int64_t size, int64_t grain, int threads, Func&& fun
 // grid over the points they left, of cells of about 256 rays each on
 // average (at most 64 a side), each cell's fraction of visible rays shrunk
 // towards the whole scene's by a prior of 16 rays.
-static trace_allocation make_trace_allocation(
-    const std::vector<std::vector<trace_shadow_record>>& rows, double pixel_deviation) {
-  auto allocation = trace_allocation{};
-  auto bounds     = bbox3f{};
-  auto count      = (size_t)0;
+// A grid over the finite positions of a pilot's records (rows of structs
+// with a `position`), of about `per_cell` records a cell on average and at
+// most `max_side` cells a side: its bounds, cells per axis and cells per unit
+// length. False, and no grid, without a finite position.
+template <typename Record>
+static bool make_record_grid(const std::vector<std::vector<Record>>& rows, double per_cell,
+    int max_side, bbox3f& bounds, vec3i& cells, vec3f& cell_scale) {
+  bounds     = bbox3f{};
+  auto count = (size_t)0;
   for (auto& row : rows) {
-    for (auto& shadow : row) {
-      if (!isfinite(shadow.position)) continue;
-      bounds = merge(bounds, shadow.position);
+    for (auto& record : row) {
+      if (!isfinite(record.position)) continue;
+      bounds = merge(bounds, record.position);
       count++;
     }
   }
-  if (count == 0 || !(pixel_deviation > 0) || !std::isfinite(pixel_deviation)) return allocation;
+  if (count == 0) return false;
   // A flat or tiny cloud of points still gets cells of some size.
   auto extent = max(bounds.max - bounds.min, vec3f{1e-6f, 1e-6f, 1e-6f});
   extent      = max(extent, vec3f{1, 1, 1} * (max_component(extent) * 1e-3f));
-  auto target = std::max((double)count / 256, 1.0);
+  auto target = std::max((double)count / per_cell, 1.0);
   auto side   = std::cbrt((double)extent.x * extent.y * extent.z / target);
-  auto cells  = vec3i{0, 0, 0};
-  for (auto a = 0; a < 3; a++) cells[a] = std::clamp((int)std::ceil(extent[a] / side), 1, 64);
-  allocation.bounds          = bounds;
-  allocation.cells           = cells;
-  allocation.cell_scale      = vec3f(cells) / extent;
+  for (auto a = 0; a < 3; a++)
+    cells[a] = std::clamp((int)std::ceil(extent[a] / side), 1, max_side);
+  cell_scale = vec3f(cells) / extent;
+  return true;
+}
+
+static trace_allocation make_trace_allocation(
+    const std::vector<std::vector<trace_shadow_record>>& rows, double pixel_deviation) {
+  auto allocation = trace_allocation{};
+  if (!(pixel_deviation > 0) || !std::isfinite(pixel_deviation)) return allocation;
+  if (!make_record_grid(
+          rows, 256, 64, allocation.bounds, allocation.cells, allocation.cell_scale))
+    return {};
   allocation.pixel_deviation = (float)pixel_deviation;
+  auto cells   = allocation.cells;
   auto ncells  = (size_t)cells.x * cells.y * cells.z;
   auto rays    = std::vector<double>(ncells), visible = std::vector<double>(ncells);
   auto total   = 0.0, total_visible = 0.0;
@@ -874,29 +887,13 @@ static bool solve_ridge_system(std::array<double, 16> a, std::array<double, 4>& 
 static trace_roulette_cache make_roulette_cache(
     const std::vector<std::vector<trace_tail_record>>& rows, double pixel_deviation,
     double scene_moment, double scene_cost) {
-  auto cache  = trace_roulette_cache{};
-  auto bounds = bbox3f{};
-  auto count  = (size_t)0;
-  for (auto& row : rows) {
-    for (auto& tail : row) {
-      if (!isfinite(tail.position)) continue;
-      bounds = merge(bounds, tail.position);
-      count++;
-    }
-  }
-  if (count == 0 || !(pixel_deviation > 0) || !std::isfinite(pixel_deviation) ||
-      !(scene_moment > 0) || !(scene_cost > 0))
+  auto cache = trace_roulette_cache{};
+  if (!(pixel_deviation > 0) || !std::isfinite(pixel_deviation) || !(scene_moment > 0) ||
+      !(scene_cost > 0))
     return cache;
-  auto extent = max(bounds.max - bounds.min, vec3f{1e-6f, 1e-6f, 1e-6f});
-  extent      = max(extent, vec3f{1, 1, 1} * (max_component(extent) * 1e-3f));
-  auto target = std::max((double)count / 1024, 1.0);
-  auto side   = std::cbrt((double)extent.x * extent.y * extent.z / target);
-  auto cells  = vec3i{0, 0, 0};
-  for (auto a = 0; a < 3; a++) cells[a] = std::clamp((int)std::ceil(extent[a] / side), 1, 16);
-  cache.bounds          = bounds;
-  cache.cells           = cells;
-  cache.cell_scale      = vec3f(cells) / extent;
+  if (!make_record_grid(rows, 1024, 16, cache.bounds, cache.cells, cache.cell_scale)) return {};
   cache.pixel_deviation = (float)pixel_deviation;
+  auto cells   = cache.cells;
   auto ncells  = (size_t)cells.x * cells.y * cells.z;
   // Per cell: X^T X (4 x 4) and X^T y for the two fits, X = (1, d).
   auto normal  = std::vector<std::array<double, 16>>(ncells);
