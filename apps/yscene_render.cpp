@@ -198,6 +198,7 @@ static std::string render_settings(const scene_data& scene, const trace_params& 
   line("allocation", params.allocation ? "learned" : "off");
   // Only when off, so that the settings of default renders stay as they were.
   if (!params.roulette_cache) line("roulette_cache", "off");
+  line("lobe_guide", number(params.lobe_guide));
   line("hair", std::string(params.hair_sampling.four_numbers ? "four-numbers" : "demux") +
                    (params.hair_sampling.per_hit ? " per-hit" : "") +
                    (params.hair_sampling.mixture_weight ? " mixture-weight" : "") +
@@ -482,6 +483,10 @@ CLI::App* add_render_command(CLI::App& app, render_command& command, std::string
       "Russian roulette by region and direction from the tails the pilot measured there "
       "(EARS: each path survives with the probability that maximises efficiency, the "
       "default), or the pilot's one threshold everywhere");
+  render->add_option("--lobe-guide", params.lobe_guide,
+          "share of a hair lobe's choice made by what the roulette cache expects its "
+          "direction to be worth per unit cost (0 = by the lobes' luminance alone)")
+      ->check(CLI::Range(0.0f, 1.0f));
   render->add_option("--shadow-threshold", params.shadow_threshold,
           "light samples that would add less than this play a roulette for their shadow ray")
       ->check(CLI::NonNegativeNumber);

@@ -1431,3 +1431,109 @@ TEST(hair, lobe_weight_sampler_reports_the_lobe_it_drew) {
     }
   }
 }
+
+TEST(hair, guided_lobe_choice_keeps_the_albedo_and_bounds_the_weights) {
+  // sample_hair_scattering_weight with a lobe guide, for four fixed hits
+  // (white, brown, smooth blond, rough red), five worths (one lobe only, the
+  // transmission lobes, uneven, one negative, all zero) and guided shares
+  // 0.5 and 0.9; 100k samples each (fixed seed):
+  // - the mean weight is the albedo sum_p A_p within 4 standard errors (+
+  //   2e-4 relative) per channel: the guide changes the noise, not the mean;
+  // - every weight is A_p / P'(p) with P' the guided choice, at most
+  //   1 / (1 - guided) times the unguided A_p / P(p) (1e-5 relative);
+  // - all worths zero, or guided 0, draw exactly the unguided sample.
+  auto hits = std::vector<albedo_hit>{
+      {"white", {0, 0, 0}, 0.3f, 0.3f, 2, 0.5f, 0.2f},
+      {"brown", hair_sigma_a_from_melanin(1.3f, 0), 0.3f, 0.3f, 2, 0.3f, 0.4f},
+      {"smooth blond", hair_sigma_a_from_melanin(0.3f, 0), 0.05f, 0.08f, 2, -0.6f, -0.7f},
+      {"rough red", hair_sigma_a_from_melanin(0.2f, 2), 0.9f, 0.9f, 0, 0.9f, 1.2f},
+  };
+  auto worths = std::vector<std::array<float, 4>>{
+      {1, 0, 0, 0}, {0, 1, 1, 1}, {0.2f, 3, 0.05f, 1}, {-1, 2, 1, 0.5f}, {0, 0, 0, 0}};
+  auto rng = make_rng(5151);
+  for (auto& hit : hits) {
+    auto wo     = vec3f{};
+    auto brdf   = make_albedo_brdf(hit, wo);
+    auto albedo = vec3f{0, 0, 0};
+    auto total  = 0.0f;
+    for (auto p = 0; p < 4; p++) albedo += brdf.lobes.a[p], total += luminance(brdf.lobes.a[p]);
+    for (auto& worth : worths) {
+      for (auto guided : {0.5f, 0.9f}) {
+        auto weights  = channel_stats{};
+        auto failures = 0;
+        for (auto i = 0; i < 100000; i++) {
+          auto rn     = vec4f{rand1f(rng), rand1f(rng), rand1f(rng), rand1f(rng)};
+          auto sample = sample_hair_scattering_weight(brdf, wo, rn, worth, guided);
+          add_sample(weights, sample.weight);
+          auto plain = sample_hair_scattering_weight(brdf, wo, rn);
+          if (worth == std::array<float, 4>{}) {
+            if (sample.weight != plain.weight || sample.incoming != plain.incoming)
+              if (failures++ < 5) ADD_FAILURE() << hit.name << ": all worths 0 changed the sample";
+            continue;
+          }
+          auto p = sample.lobe;
+          if (p < 0 || p > 3) {
+            if (failures++ < 5) ADD_FAILURE() << hit.name << ": lobe " << p;
+            continue;
+          }
+          auto unguided = luminance(brdf.lobes.a[p]) > 0
+                              ? max_component(brdf.lobes.a[p]) * total / luminance(brdf.lobes.a[p])
+                              : 0.0f;
+          if (max_component(sample.weight) > unguided / (1 - guided) * (1 + 1e-5f) &&
+              failures++ < 5)
+            ADD_FAILURE() << hit.name << ": lobe " << p << " weight "
+                          << max_component(sample.weight) << " above " << unguided / (1 - guided);
+        }
+        EXPECT_EQ(failures, 0) << hit.name;
+        for (auto c = 0; c < 3; c++) {
+          auto mean = sample_mean(weights, c), error = standard_error(weights, c);
+          EXPECT_NEAR(mean, albedo[c], 4 * error + 2e-4 * albedo[c])
+              << hit.name << " guided " << guided << " worth " << worth[0] << " " << worth[1]
+              << " " << worth[2] << " " << worth[3] << " channel " << c;
+        }
+      }
+    }
+    auto rn = vec4f{0.3f, 0.6f, 0.2f, 0.9f};
+    auto a = sample_hair_scattering_weight(brdf, wo, rn, worths[2], 0.0f);
+    auto b = sample_hair_scattering_weight(brdf, wo, rn);
+    EXPECT_EQ(a.incoming, b.incoming) << hit.name;
+    EXPECT_EQ(a.weight, b.weight) << hit.name;
+  }
+}
+
+TEST(hair, lobe_directions_are_where_each_lobe_peaks) {
+  // hair_lobe_directions of smooth fibres (beta_m = beta_n = 0.1, no tilt
+  // and 3 degrees; blond and brown; three offsets and outgoing angles):
+  // R, TT and TRT's directions are unit vectors at which the lobe's own term
+  // (eval_hair_scattering_lobes) is at least that at 256 random directions
+  // (fixed seed), and not below 1/4 of its largest value over them; the
+  // higher orders' direction lies along the fibre (the mean of a uniform
+  // azimuth), its length cos of the tilted theta at most 1.
+  auto rng = make_rng(777);
+  for (auto alpha : {0.0f, 3.0f}) {
+    for (auto eumelanin : {0.3f, 1.3f}) {
+      for (auto h : {-0.7f, 0.0f, 0.4f}) {
+        for (auto theta_o : {-0.8f, 0.1f, 0.6f}) {
+          auto hit  = albedo_hit{"smooth", hair_sigma_a_from_melanin(eumelanin, 0), 0.1f, 0.1f,
+              alpha, h, theta_o};
+          auto wo   = vec3f{};
+          auto brdf = make_albedo_brdf(hit, wo);
+          auto directions = hair_lobe_directions(brdf, wo);
+          for (auto p = 0; p < 3; p++) {
+            EXPECT_NEAR(length(directions[p]), 1, 1e-5f) << p;
+            auto at_centre = luminance(eval_hair_scattering_lobes(brdf, wo, directions[p])[p]);
+            auto largest   = 0.0f;
+            for (auto i = 0; i < 256; i++) {
+              auto wi = sample_sphere(rand2f(rng));
+              largest = std::max(largest, luminance(eval_hair_scattering_lobes(brdf, wo, wi)[p]));
+            }
+            EXPECT_GE(at_centre, largest) << "lobe " << p << " h " << h << " theta " << theta_o;
+            EXPECT_GT(at_centre, 0.0f) << "lobe " << p;
+          }
+          EXPECT_NEAR(std::abs(dot(directions[3], brdf.x)), length(directions[3]), 1e-6f);
+          EXPECT_LE(length(directions[3]), 1 + 1e-6f);
+        }
+      }
+    }
+  }
+}

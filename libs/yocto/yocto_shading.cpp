@@ -253,14 +253,21 @@ bool bsdf_takes_more_numbers(const material_point& point) {
 }
 
 bsdf_sample sample_bsdf(const material_point& point, const vec3f& outgoing, float rnl,
-    const vec2f& rn, const vec2f& more, bool needs_pdf) {
+    const vec2f& rn, const vec2f& more, bool needs_pdf, const std::array<float, 4>* lobe_worth,
+    float guided) {
   auto sample = bsdf_sample{};
   if (point.type == material_type::hair && !needs_pdf && !point.hair_sampling.mixture_weight) {
     // No pdf needed: the sampled lobe's own weight, no evaluation.
-    auto hair = point.hair_sampling.four_numbers
-                    ? sample_hair_scattering_weight(
-                          point.hair, outgoing, vec4f{rn.x, rn.y, more.x, more.y})
-                    : sample_hair_scattering_weight(point.hair, outgoing, rn);
+    auto four = vec4f{rn.x, rn.y, more.x, more.y};
+    auto hair = hair_sample{};
+    if (lobe_worth && point.hair_sampling.four_numbers)
+      hair = sample_hair_scattering_weight(point.hair, outgoing, four, *lobe_worth, guided);
+    else if (lobe_worth)
+      hair = sample_hair_scattering_weight(point.hair, outgoing, rn, *lobe_worth, guided);
+    else if (point.hair_sampling.four_numbers)
+      hair = sample_hair_scattering_weight(point.hair, outgoing, four);
+    else
+      hair = sample_hair_scattering_weight(point.hair, outgoing, rn);
     if (hair.incoming == vec3f{0, 0, 0} || !isfinite(hair.incoming)) return {};
     if (hair.weight == vec3f{0, 0, 0}) return {};
     sample.incoming = hair.incoming;

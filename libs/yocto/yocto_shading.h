@@ -125,7 +125,9 @@ bool bsdf_takes_more_numbers(const material_point& point);
 // point scatters nothing that way. With needs_pdf false (no MIS weight will
 // need it), hair takes the weight A_p / P(p) of the lobe it drew and
 // evaluates no lobe (unless hair_sampling.mixture_weight or four_numbers);
-// pdf is then 0. rnl: glossy lobe choice; rn, more: the direction.
+// pdf is then 0. rnl: glossy lobe choice; rn, more: the direction. With
+// lobe_worth, that lobe weight comes from the guided lobe choice (hair only,
+// without a pdf; see sample_hair_scattering_weight).
 struct bsdf_sample {
   vec3f incoming = {0, 0, 0};
   vec3f weight   = {0, 0, 0};
@@ -134,7 +136,8 @@ struct bsdf_sample {
   int   lobe     = -1;  // hair drawn by its lobe weight: the lobe p
 };
 bsdf_sample sample_bsdf(const material_point& point, const vec3f& outgoing, float rnl,
-    const vec2f& rn, const vec2f& more, bool needs_pdf);
+    const vec2f& rn, const vec2f& more, bool needs_pdf,
+    const std::array<float, 4>* lobe_worth = nullptr, float guided = 0);
 
 // Hair: eval_bsdfcos lobe by lobe (R, TT, TRT, TRRT and higher), which sum
 // to it; other materials have no lobes (zeros).

@@ -385,17 +385,26 @@ int find_roulette_cell(const trace_roulette_cache& cache, const vec3f& position)
   return find_grid_cell(cache.bounds, cache.cells, cache.cell_scale, position);
 }
 
+// sqrt(M2 / c) of a cell's fit in a direction.
+static float eval_tail_worth(const std::array<float, 8>& tail, const vec3f& direction) {
+  auto moment = tail[0] + tail[1] * direction.x + tail[2] * direction.y + tail[3] * direction.z;
+  auto cost   = tail[4] + tail[5] * direction.x + tail[6] * direction.y + tail[7] * direction.z;
+  // A linear fit may fall below zero towards directions its cell's tails
+  // rarely took: no worth there; and a tail costs at least its next ray.
+  return std::sqrt(std::max(moment, 0.0f) / std::max(cost, 1.0f));
+}
+
+float roulette_tail_worth(const trace_roulette_cache& cache, const vec3f& position,
+    const vec3f& direction) {
+  auto cell = find_roulette_cell(cache, position);
+  return cell < 0 ? 0.0f : eval_tail_worth(cache.tails[cell], direction);
+}
+
 float roulette_survival(const trace_roulette_cache& cache, const vec3f& position,
     const vec3f& direction, float weight) {
   auto cell = find_roulette_cell(cache, position);
   if (cell < 0 || !(weight > 0)) return std::min(std::max(weight, 0.0f), 1.0f);
-  auto& tail   = cache.tails[cell];
-  auto  moment = tail[0] + tail[1] * direction.x + tail[2] * direction.y + tail[3] * direction.z;
-  auto  cost   = tail[4] + tail[5] * direction.x + tail[6] * direction.y + tail[7] * direction.z;
-  // A linear fit may fall below zero towards directions its cell's tails
-  // rarely took: no worth there; and a tail costs at least its next ray.
-  moment = std::max(moment, 0.0f), cost = std::max(cost, 1.0f);
-  auto survive = weight * std::sqrt(moment / cost) / cache.pixel_deviation;
+  auto survive = weight * eval_tail_worth(cache.tails[cell], direction) / cache.pixel_deviation;
   // As the global threshold's clamp: never below the throughput itself,
   // nor above 16 times it.
   survive = std::clamp(survive, weight, 16 * weight);
@@ -511,8 +520,27 @@ static void scatter_path(const trace_walk& walk, material_point point, ray3f ray
     } else {
       rn = sample_sequence2f(sequence, pairs + trace_pair_direction);
     }
-    // The pdf only where an MIS weight will need it (0 otherwise).
-    auto sample = sample_bsdf(point, outgoing, lobe_roulette.x, rn, more, needs_pdf);
+    // The pdf only where an MIS weight will need it (0 otherwise). Hair
+    // without it may choose its lobe by what the cache expects each lobe's
+    // direction to be worth. A fibre that absorbs nothing keeps the
+    // luminance choice: its every lobe weight is then exactly 1, the
+    // zero-variance estimate of a uniform sky (the white furnace), which a
+    // guide learned from noisy tails could only perturb.
+    auto guide = roulette && params.lobe_guide > 0 && !needs_pdf &&
+                 point.type == material_type::hair &&
+                 min_component(eval_hair_albedo(point.hair, outgoing)) < 1 - 1e-4f;
+    auto lobe_worth = std::array<float, 4>{};
+    if (guide) {
+      auto cell = find_roulette_cell(*roulette, point.position);
+      guide     = cell >= 0;
+      if (guide) {
+        auto directions = hair_lobe_directions(point.hair, outgoing);
+        for (auto p = 0; p < 4; p++)
+          lobe_worth[p] = eval_tail_worth(roulette->tails[cell], directions[p]);
+      }
+    }
+    auto sample = sample_bsdf(point, outgoing, lobe_roulette.x, rn, more, needs_pdf,
+        guide ? &lobe_worth : nullptr, params.lobe_guide);
     if (sample.weight == vec3f{0, 0, 0}) break;
     auto incoming = sample.incoming;
     auto bsdf_pdf = sample.pdf;

@@ -99,6 +99,11 @@ struct trace_params {
   // trace_roulette_cache) when the threshold is the pilot's; off: the
   // pilot's one threshold everywhere.
   bool               roulette_cache = true;
+  // Hair lobes chosen in part (this share, in [0, 1]) by what the roulette
+  // cache expects each lobe's direction to be worth per unit cost, where no
+  // MIS needs the BSDF's pdf (see sample_hair_scattering_weight); 0 for the
+  // luminance choice alone. Needs the roulette cache.
+  float              lobe_guide = 0.5f;
 };
 
 }  // namespace yocto
@@ -187,6 +192,11 @@ struct trace_roulette_cache {
 
 // The cell of a point in the cache's grid, as find_allocation_cell.
 int find_roulette_cell(const trace_roulette_cache& cache, const vec3f& position);
+
+// What the cache expects a tail leaving `position` in `direction` to be
+// worth per unit throughput and cost, sqrt(M2 / c); 0 without a cell.
+float roulette_tail_worth(const trace_roulette_cache& cache, const vec3f& position,
+    const vec3f& direction);
 
 // The survival probability of a path of throughput `weight` leaving
 // `position` in `direction` (see trace_roulette_cache), in (0, 1].

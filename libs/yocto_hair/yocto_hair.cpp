@@ -582,15 +582,34 @@ static vec3f sample_hair_lobe_direction(const hair_brdf& brdf, const hair_lobes&
 
 // A lobe chosen by rn.x, a direction of it from the other three numbers, and
 // the lobe's weight A_p / P(p); zero direction and weight if the fiber
-// returns nothing.
-static hair_sample sample_hair_lobes(
-    const hair_brdf& brdf, const vec3f& outgoing, const vec4f& rn) {
+// returns nothing. With `worth`, P(p) is the guided choice of
+// sample_hair_scattering_weight.
+static hair_sample sample_hair_lobes(const hair_brdf& brdf, const vec3f& outgoing,
+    const vec4f& rn, const std::array<float, 4>* worth = nullptr, float guided = 0) {
   auto  wo      = make_angles(brdf, outgoing);
   auto  storage = hair_lobes{};
   auto& lobes   = find_lobes(brdf, outgoing, wo, storage);
-  auto  p       = sample_hair_lobe(lobes, rn.x);
-  if (p < 0) return {};
-  return {sample_hair_lobe_direction(brdf, lobes, wo, p, rn), p, lobes.a[p] / lobes.a_pdf[p]};
+  if (!worth || !(guided > 0)) {
+    auto p = sample_hair_lobe(lobes, rn.x);
+    if (p < 0) return {};
+    return {sample_hair_lobe_direction(brdf, lobes, wo, p, rn), p, lobes.a[p] / lobes.a_pdf[p]};
+  }
+  // (1 - guided) P(p) + guided P(p) worth_p / sum_q P(q) worth_q: the
+  // luminance choice keeps a share, so no lobe's weight grows by more than
+  // 1 / (1 - guided) however wrong the worth.
+  auto total = 0.0f;
+  for (auto p = 0; p < 4; p++) total += lobes.a_pdf[p] * std::max((*worth)[p], 0.0f);
+  auto guided_lobes = lobes;
+  guided            = std::min(guided, 1.0f);
+  if (total > 0 && std::isfinite(total)) {
+    for (auto p = 0; p < 4; p++)
+      guided_lobes.a_pdf[p] = lobes.a_pdf[p] *
+                              (1 - guided + guided * std::max((*worth)[p], 0.0f) / total);
+  }
+  auto p = sample_hair_lobe(guided_lobes, rn.x);
+  if (p < 0 || !(guided_lobes.a_pdf[p] > 0)) return {};
+  return {sample_hair_lobe_direction(brdf, lobes, wo, p, rn), p,
+      lobes.a[p] / guided_lobes.a_pdf[p]};
 }
 
 // Two numbers demuxed into the four a direction takes.
@@ -617,6 +636,40 @@ hair_sample sample_hair_scattering_weight(
 hair_sample sample_hair_scattering_weight(
     const hair_brdf& brdf, const vec3f& outgoing, const vec4f& rn) {
   return sample_hair_lobes(brdf, outgoing, rn);
+}
+
+hair_sample sample_hair_scattering_weight(const hair_brdf& brdf, const vec3f& outgoing,
+    const vec4f& rn, const std::array<float, 4>& worth, float guided) {
+  return sample_hair_lobes(brdf, outgoing, rn, &worth, guided);
+}
+
+hair_sample sample_hair_scattering_weight(const hair_brdf& brdf, const vec3f& outgoing,
+    const vec2f& rn, const std::array<float, 4>& worth, float guided) {
+  return sample_hair_lobes(brdf, outgoing, demux_hair_numbers(rn), &worth, guided);
+}
+
+std::array<vec3f, 4> hair_lobe_directions(const hair_brdf& brdf, const vec3f& outgoing) {
+  auto  wo        = make_angles(brdf, outgoing);
+  auto  storage   = hair_lobes{};
+  auto& lobes     = find_lobes(brdf, outgoing, wo, storage);
+  auto  cos_phi_o = 1.0f, sin_phi_o = 0.0f;
+  if (wo.cos_theta > 0) cos_phi_o = wo.y / wo.cos_theta, sin_phi_o = wo.z / wo.cos_theta;
+  auto directions = std::array<vec3f, 4>{};
+  for (auto p = 0; p < 4; p++) {
+    // The centre of the longitudinal cone: theta_i = -(tilted theta_o).
+    auto sin_theta_i = -lobes.sin_theta[p], cos_theta_i = lobes.cos_theta[p];
+    if (p == 3) {
+      // Uniform azimuth: the mean of the directions lies on the fiber.
+      directions[p] = brdf.x * sin_theta_i;
+      continue;
+    }
+    auto cos_dphi = std::cos(lobes.phi_shift[p]), sin_dphi = std::sin(lobes.phi_shift[p]);
+    auto cos_phi_i = cos_phi_o * cos_dphi - sin_phi_o * sin_dphi;
+    auto sin_phi_i = sin_phi_o * cos_dphi + cos_phi_o * sin_dphi;
+    directions[p]  = brdf.x * sin_theta_i + brdf.y * (cos_theta_i * cos_phi_i) +
+                    brdf.z * (cos_theta_i * sin_phi_i);
+  }
+  return directions;
 }
 
 }  // namespace yocto

@@ -191,6 +191,25 @@ hair_sample sample_hair_scattering_weight(
 hair_sample sample_hair_scattering_weight(
     const hair_brdf& brdf, const vec3f& outgoing, const vec4f& rn);
 
+// Lobe guiding: the same with the lobe p chosen with probability
+// (1 - guided) P(p) + guided P(p) worth_p / sum_q P(q) worth_q, P the
+// luminance choice above and worth_p >= 0 what a renderer expects a
+// direction of lobe p to be worth (say, what the light arriving from
+// hair_lobe_directions' p-th direction adds per unit of cost); the weight is
+// A_p over that probability, still unbiased. guided in [0, 1]; with 0, or
+// every worth 0, it is the unguided choice. As guided < 1, no lobe's weight
+// exceeds 1 / (1 - guided) times its unguided weight.
+hair_sample sample_hair_scattering_weight(const hair_brdf& brdf, const vec3f& outgoing,
+    const vec4f& rn, const std::array<float, 4>& worth, float guided);
+hair_sample sample_hair_scattering_weight(const hair_brdf& brdf, const vec3f& outgoing,
+    const vec2f& rn, const std::array<float, 4>& worth, float guided);
+
+// A direction that stands for each lobe's incoming directions (p = 0 R to 3
+// the higher orders): R, TT and TRT their centre, theta_i = -theta_o (tilted)
+// at the azimuth Phi(p, h); the higher orders, of uniform azimuth, the mean
+// of their directions, which lies along the fiber (not a unit vector).
+std::array<vec3f, 4> hair_lobe_directions(const hair_brdf& brdf, const vec3f& outgoing);
+
 // Solid-angle pdf of sample_hair_scattering.
 float sample_hair_scattering_pdf(
     const hair_brdf& brdf, const vec3f& outgoing, const vec3f& incoming);
