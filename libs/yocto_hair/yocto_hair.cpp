@@ -392,6 +392,7 @@ static hair_lobes make_lobes(const hair_brdf& brdf, const hair_angles& wo) {
   for (auto p = 0; p < 3; p++) {
     lobes.phi_shift[p] = 2 * p * gamma_t - 2 * brdf.gamma_o + p * pif;
   }
+  lobes.sin_gamma_t = sin_gamma_t, lobes.cos_gamma_t = cos_gamma_t;
 
   // Scale tilt on theta_o (pbrt-v3 after PR #256, pbrt-v4): R sees
   // theta_o - 2 alpha, TT theta_o + alpha, TRT theta_o + 4 alpha; the p_max
@@ -528,18 +529,18 @@ vec3f eval_hair_albedo(const hair_brdf& brdf, const vec3f& outgoing) {
   return lobes.a[0] + lobes.a[1] + lobes.a[2] + lobes.a[3];
 }
 
-// The lobe chosen by u: p with probability a_pdf[p]; -1 if the fiber
+// The lobe chosen by u: p with probability choice[p]; -1 if the fiber
 // returns nothing.
-static int sample_hair_lobe(const hair_lobes& lobes, float u) {
+static int sample_hair_lobe(const float choice[4], float u) {
   auto last = -1;
   for (auto q = 0; q < 4; q++) {
-    if (lobes.a_pdf[q] > 0) last = q;
+    if (choice[q] > 0) last = q;
   }
   if (last < 0) return -1;
   auto p = 0;
   for (; p < last; p++) {
-    if (u < lobes.a_pdf[p]) break;
-    u -= lobes.a_pdf[p];
+    if (u < choice[p]) break;
+    u -= choice[p];
   }
   return p;
 }
@@ -590,7 +591,7 @@ static hair_sample sample_hair_lobes(const hair_brdf& brdf, const vec3f& outgoin
   auto  storage = hair_lobes{};
   auto& lobes   = find_lobes(brdf, outgoing, wo, storage);
   if (!worth || !(guided > 0)) {
-    auto p = sample_hair_lobe(lobes, rn.x);
+    auto p = sample_hair_lobe(lobes.a_pdf, rn.x);
     if (p < 0) return {};
     return {sample_hair_lobe_direction(brdf, lobes, wo, p, rn), p, lobes.a[p] / lobes.a_pdf[p]};
   }
@@ -599,17 +600,15 @@ static hair_sample sample_hair_lobes(const hair_brdf& brdf, const vec3f& outgoin
   // 1 / (1 - guided) however wrong the worth.
   auto total = 0.0f;
   for (auto p = 0; p < 4; p++) total += lobes.a_pdf[p] * std::max((*worth)[p], 0.0f);
-  auto guided_lobes = lobes;
-  guided            = std::min(guided, 1.0f);
+  float choice[4] = {lobes.a_pdf[0], lobes.a_pdf[1], lobes.a_pdf[2], lobes.a_pdf[3]};
+  guided          = std::min(guided, 1.0f);
   if (total > 0 && std::isfinite(total)) {
     for (auto p = 0; p < 4; p++)
-      guided_lobes.a_pdf[p] = lobes.a_pdf[p] *
-                              (1 - guided + guided * std::max((*worth)[p], 0.0f) / total);
+      choice[p] *= 1 - guided + guided * std::max((*worth)[p], 0.0f) / total;
   }
-  auto p = sample_hair_lobe(guided_lobes, rn.x);
-  if (p < 0 || !(guided_lobes.a_pdf[p] > 0)) return {};
-  return {sample_hair_lobe_direction(brdf, lobes, wo, p, rn), p,
-      lobes.a[p] / guided_lobes.a_pdf[p]};
+  auto p = sample_hair_lobe(choice, rn.x);
+  if (p < 0 || !(choice[p] > 0)) return {};
+  return {sample_hair_lobe_direction(brdf, lobes, wo, p, rn), p, lobes.a[p] / choice[p]};
 }
 
 // Two numbers demuxed into the four a direction takes.
@@ -654,21 +653,25 @@ std::array<vec3f, 4> hair_lobe_directions(const hair_brdf& brdf, const vec3f& ou
   auto& lobes     = find_lobes(brdf, outgoing, wo, storage);
   auto  cos_phi_o = 1.0f, sin_phi_o = 0.0f;
   if (wo.cos_theta > 0) cos_phi_o = wo.y / wo.cos_theta, sin_phi_o = wo.z / wo.cos_theta;
+  // Phi(p, h) as rotations (no trigonometric call): by -2 gamma_o (cos
+  // 1 - 2 h^2, sin -2 h cos gamma_o), then p times by 2 gamma_t + pi.
+  auto h = brdf.h, cos_shift = 1 - 2 * h * h, sin_shift = -2 * h * brdf.cos_gamma_o;
+  auto cos_step = -(1 - 2 * sqr(lobes.sin_gamma_t));
+  auto sin_step = -2 * lobes.sin_gamma_t * lobes.cos_gamma_t;
   auto directions = std::array<vec3f, 4>{};
-  for (auto p = 0; p < 4; p++) {
+  for (auto p = 0; p < 3; p++) {
     // The centre of the longitudinal cone: theta_i = -(tilted theta_o).
     auto sin_theta_i = -lobes.sin_theta[p], cos_theta_i = lobes.cos_theta[p];
-    if (p == 3) {
-      // Uniform azimuth: the mean of the directions lies on the fiber.
-      directions[p] = brdf.x * sin_theta_i;
-      continue;
-    }
-    auto cos_dphi = std::cos(lobes.phi_shift[p]), sin_dphi = std::sin(lobes.phi_shift[p]);
-    auto cos_phi_i = cos_phi_o * cos_dphi - sin_phi_o * sin_dphi;
-    auto sin_phi_i = sin_phi_o * cos_dphi + cos_phi_o * sin_dphi;
-    directions[p]  = brdf.x * sin_theta_i + brdf.y * (cos_theta_i * cos_phi_i) +
+    auto cos_phi_i   = cos_phi_o * cos_shift - sin_phi_o * sin_shift;
+    auto sin_phi_i   = sin_phi_o * cos_shift + cos_phi_o * sin_shift;
+    directions[p]    = brdf.x * sin_theta_i + brdf.y * (cos_theta_i * cos_phi_i) +
                     brdf.z * (cos_theta_i * sin_phi_i);
+    auto next = cos_shift * cos_step - sin_shift * sin_step;
+    sin_shift = sin_shift * cos_step + cos_shift * sin_step, cos_shift = next;
   }
+  // The higher orders, of uniform azimuth: the mean of their directions lies
+  // on the fiber.
+  directions[3] = brdf.x * -lobes.sin_theta[3];
   return directions;
 }
 

@@ -107,6 +107,7 @@ struct hair_lobes {
   vec3f a[4]         = {};
   float a_pdf[4]     = {0, 0, 0, 0};
   float phi_shift[3] = {0, 0, 0};
+  float sin_gamma_t  = 0, cos_gamma_t = 1;  // refracted offset angle
   float sin_theta[4] = {0, 0, 0, 0};
   float cos_theta[4] = {1, 1, 1, 1};
 };
