@@ -394,21 +394,20 @@ static float eval_tail_worth(const std::array<float, 8>& tail, const vec3f& dire
   return std::sqrt(std::max(moment, 0.0f) / std::max(cost, 1.0f));
 }
 
-float roulette_tail_worth(const trace_roulette_cache& cache, const vec3f& position,
-    const vec3f& direction) {
-  auto cell = find_roulette_cell(cache, position);
-  return cell < 0 ? 0.0f : eval_tail_worth(cache.tails[cell], direction);
-}
-
-float roulette_survival(const trace_roulette_cache& cache, const vec3f& position,
-    const vec3f& direction, float weight) {
-  auto cell = find_roulette_cell(cache, position);
+// roulette_survival in a cell already found.
+static float roulette_survival(
+    const trace_roulette_cache& cache, int cell, const vec3f& direction, float weight) {
   if (cell < 0 || !(weight > 0)) return std::min(std::max(weight, 0.0f), 1.0f);
   auto survive = weight * eval_tail_worth(cache.tails[cell], direction) / cache.pixel_deviation;
   // As the global threshold's clamp: never below the throughput itself,
   // nor above 16 times it.
   survive = std::clamp(survive, weight, 16 * weight);
   return std::isfinite(survive) ? std::min(survive, 1.0f) : std::min(weight, 1.0f);
+}
+
+float roulette_survival(const trace_roulette_cache& cache, const vec3f& position,
+    const vec3f& direction, float weight) {
+  return roulette_survival(cache, find_roulette_cell(cache, position), direction, weight);
 }
 
 static scene_intersection cast_closest(const trace_walk& walk, const ray3f& ray) {
@@ -526,18 +525,15 @@ static void scatter_path(const trace_walk& walk, material_point point, ray3f ray
     // luminance choice: its every lobe weight is then exactly 1, the
     // zero-variance estimate of a uniform sky (the white furnace), which a
     // guide learned from noisy tails could only perturb.
-    auto guide = roulette && params.lobe_guide > 0 && !needs_pdf &&
+    auto cell  = roulette ? find_roulette_cell(*roulette, point.position) : -1;
+    auto guide = cell >= 0 && params.lobe_guide > 0 && !needs_pdf &&
                  point.type == material_type::hair &&
-                 min_component(eval_hair_albedo(point.hair, outgoing)) < 1 - 1e-4f;
+                 point.hair.material.sigma_a != vec3f{0, 0, 0};
     auto lobe_worth = std::array<float, 4>{};
     if (guide) {
-      auto cell = find_roulette_cell(*roulette, point.position);
-      guide     = cell >= 0;
-      if (guide) {
-        auto directions = hair_lobe_directions(point.hair, outgoing);
-        for (auto p = 0; p < 4; p++)
-          lobe_worth[p] = eval_tail_worth(roulette->tails[cell], directions[p]);
-      }
+      auto directions = hair_lobe_directions(point.hair, outgoing);
+      for (auto p = 0; p < 4; p++)
+        lobe_worth[p] = eval_tail_worth(roulette->tails[cell], directions[p]);
     }
     auto sample = sample_bsdf(point, outgoing, lobe_roulette.x, rn, more, needs_pdf,
         guide ? &lobe_worth : nullptr, params.lobe_guide);
@@ -567,8 +563,7 @@ static void scatter_path(const trace_walk& walk, material_point point, ray3f ray
     // pilot's), and is weighted up when it does (unbiased). Either is at
     // least the throughput: a path that carries all of its energy (a white
     // fiber) would gain variance and nothing else.
-    auto survive = roulette ? roulette_survival(*roulette, point.position, incoming,
-                                  max_component(weight))
+    auto survive = roulette ? roulette_survival(*roulette, cell, incoming, max_component(weight))
                             : max_component(weight) / threshold;
     if (bounce >= params.roulette_bounce) {
       if (points)

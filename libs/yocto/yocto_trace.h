@@ -193,11 +193,6 @@ struct trace_roulette_cache {
 // The cell of a point in the cache's grid, as find_allocation_cell.
 int find_roulette_cell(const trace_roulette_cache& cache, const vec3f& position);
 
-// What the cache expects a tail leaving `position` in `direction` to be
-// worth per unit throughput and cost, sqrt(M2 / c); 0 without a cell.
-float roulette_tail_worth(const trace_roulette_cache& cache, const vec3f& position,
-    const vec3f& direction);
-
 // The survival probability of a path of throughput `weight` leaving
 // `position` in `direction` (see trace_roulette_cache), in (0, 1].
 float roulette_survival(const trace_roulette_cache& cache, const vec3f& position,
