@@ -485,8 +485,9 @@ CLI::App* add_render_command(CLI::App& app, render_command& command, std::string
       "default), or the pilot's one threshold everywhere");
   render->add_option("--lobe-guide", params.lobe_guide,
           "share of a hair lobe's choice made by what the roulette cache expects its "
-          "direction to be worth per unit cost (0 = by the lobes' luminance alone)")
-      ->check(CLI::Range(0.0f, 1.0f));
+          "direction to be worth per unit cost (0 = by the lobes' luminance alone; at most "
+          "0.95, so that every lobe keeps a chance)")
+      ->check(CLI::Range(0.0f, 0.95f));
   render->add_option("--shadow-threshold", params.shadow_threshold,
           "light samples that would add less than this play a roulette for their shadow ray")
       ->check(CLI::NonNegativeNumber);

@@ -1969,8 +1969,8 @@ TEST(trace, lobe_guide_keeps_the_mean_and_lowers_the_noise) {
   // - 16 spp, 8 seeds: the pixels' variance across seeds times the rays cast
   //   (the cost) below 0.8 times the unguided one (measured 0.5: tails into
   //   the wall are chosen less often).
-  // - Guide 0 is the luminance choice bit for bit, and the guide needs the
-  //   cache: with it off, the guide does nothing.
+  // - The guide needs the cache: with it off, the guide does nothing (the
+  //   same bits as guide 0).
   auto scene        = make_walled_hair_scene();
   auto params       = trace_params{};
   params.resolution = 24;
@@ -2019,6 +2019,18 @@ TEST(trace, lobe_guide_keeps_the_mean_and_lowers_the_noise) {
               "variance x rays %.2f\n",
       guided_variance, plain_variance, (long long)guided_rays, (long long)plain_rays, ratio);
   EXPECT_LT(ratio, 0.8);
+  // The share is checked: in [0, 0.95], so that every lobe keeps a chance.
+  auto message = std::string{};
+  for (auto share : {0.0f, 0.5f, 0.95f}) {
+    params.lobe_guide = share;
+    EXPECT_TRUE(check_trace_params(scene, params, message)) << share << ": " << message;
+  }
+  for (auto share : {-0.1f, 0.96f, 1.0f, std::numeric_limits<float>::quiet_NaN()}) {
+    params.lobe_guide = share;
+    message           = "";
+    EXPECT_FALSE(check_trace_params(scene, params, message)) << share;
+    EXPECT_NE(message.find("lobe guide"), std::string::npos) << message;
+  }
   params.samples        = 4;
   params.seed           = 5;
   params.lobe_guide     = 0.5f;

@@ -709,6 +709,8 @@ bool check_trace_params(const scene_data& scene, const trace_params& params,
   if (!(params.roulette_threshold >= 0) || !std::isfinite(params.roulette_threshold))
     return error = "roulette threshold must be 0 (automatic) or positive", false;
   if (!(params.clamp >= 0)) return error = "clamp must be 0 (none) or positive", false;
+  if (!(params.lobe_guide >= 0 && params.lobe_guide <= 0.95f))
+    return error = "lobe guide must be in [0, 0.95]", false;
   if (params.threads < 0) return error = "threads must be 0 (all) or positive", false;
   return true;
 }

@@ -99,7 +99,7 @@ struct trace_params {
   // trace_roulette_cache) when the threshold is the pilot's; off: the
   // pilot's one threshold everywhere.
   bool               roulette_cache = true;
-  // Hair lobes chosen in part (this share, in [0, 1]) by what the roulette
+  // Hair lobes chosen in part (this share, in [0, 0.95]) by what the roulette
   // cache expects each lobe's direction to be worth per unit cost, where no
   // MIS needs the BSDF's pdf (see sample_hair_scattering_weight); 0 for the
   // luminance choice alone. Needs the roulette cache.

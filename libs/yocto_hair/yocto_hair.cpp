@@ -596,12 +596,13 @@ static hair_sample sample_hair_lobes(const hair_brdf& brdf, const vec3f& outgoin
     return {sample_hair_lobe_direction(brdf, lobes, wo, p, rn), p, lobes.a[p] / lobes.a_pdf[p]};
   }
   // (1 - guided) P(p) + guided P(p) worth_p / sum_q P(q) worth_q: the
-  // luminance choice keeps a share, so no lobe's weight grows by more than
-  // 1 / (1 - guided) however wrong the worth.
+  // luminance choice keeps a share (at least 5 %: a lobe the worth rates 0
+  // must keep a chance, or the estimate is biased where the worth is wrong),
+  // so no lobe's weight grows by more than 1 / (1 - guided).
   auto total = 0.0f;
   for (auto p = 0; p < 4; p++) total += lobes.a_pdf[p] * std::max((*worth)[p], 0.0f);
   float choice[4] = {lobes.a_pdf[0], lobes.a_pdf[1], lobes.a_pdf[2], lobes.a_pdf[3]};
-  guided          = std::min(guided, 1.0f);
+  guided          = std::min(guided, 0.95f);
   if (total > 0 && std::isfinite(total)) {
     for (auto p = 0; p < 4; p++)
       choice[p] *= 1 - guided + guided * std::max((*worth)[p], 0.0f) / total;

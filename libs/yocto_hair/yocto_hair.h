@@ -197,9 +197,10 @@ hair_sample sample_hair_scattering_weight(
 // luminance choice above and worth_p >= 0 what a renderer expects a
 // direction of lobe p to be worth (say, what the light arriving from
 // hair_lobe_directions' p-th direction adds per unit of cost); the weight is
-// A_p over that probability, still unbiased. guided in [0, 1]; with 0, or
-// every worth 0, it is the unguided choice. As guided < 1, no lobe's weight
-// exceeds 1 / (1 - guided) times its unguided weight.
+// A_p over that probability, still unbiased. guided in [0, 0.95] (larger is
+// taken as 0.95: a lobe rated 0 keeps a chance); with 0, or every worth 0,
+// it is the unguided choice. No lobe's weight exceeds 1 / (1 - guided) times
+// its unguided weight.
 hair_sample sample_hair_scattering_weight(const hair_brdf& brdf, const vec3f& outgoing,
     const vec4f& rn, const std::array<float, 4>& worth, float guided);
 hair_sample sample_hair_scattering_weight(const hair_brdf& brdf, const vec3f& outgoing,
