@@ -1358,6 +1358,17 @@ TEST(hair, scattering_lobes_sum_to_scattering) {
   EXPECT_GT(nonzero, count / 4);  // not vacuous
 }
 
+// Four fixed hits for the lobe-choice tests: white, brown, smooth blond and
+// rough red.
+static std::vector<albedo_hit> make_lobe_choice_hits() {
+  return {
+      {"white", {0, 0, 0}, 0.3f, 0.3f, 2, 0.5f, 0.2f},
+      {"brown", hair_sigma_a_from_melanin(1.3f, 0), 0.3f, 0.3f, 2, 0.3f, 0.4f},
+      {"smooth blond", hair_sigma_a_from_melanin(0.3f, 0), 0.05f, 0.08f, 2, -0.6f, -0.7f},
+      {"rough red", hair_sigma_a_from_melanin(0.2f, 2), 0.9f, 0.9f, 0, 0.9f, 1.2f},
+  };
+}
+
 TEST(hair, lobe_weight_sampler_reports_the_lobe_it_drew) {
   // sample_hair_scattering_weight's lobe p for four fixed hits (white, brown,
   // smooth blond, rough red; 100k samples each, fixed seed):
@@ -1369,12 +1380,7 @@ TEST(hair, lobe_weight_sampler_reports_the_lobe_it_drew) {
   //   it with probability P(q) M_q N_q / pdf = luminance(term_q) /
   //   luminance(eval) at wi, so the mean of 1{p = q} minus that is 0 within
   //   4 standard errors (+ 2e-4, M_p's normalisation) for every q.
-  auto hits = std::vector<albedo_hit>{
-      {"white", {0, 0, 0}, 0.3f, 0.3f, 2, 0.5f, 0.2f},
-      {"brown", hair_sigma_a_from_melanin(1.3f, 0), 0.3f, 0.3f, 2, 0.3f, 0.4f},
-      {"smooth blond", hair_sigma_a_from_melanin(0.3f, 0), 0.05f, 0.08f, 2, -0.6f, -0.7f},
-      {"rough red", hair_sigma_a_from_melanin(0.2f, 2), 0.9f, 0.9f, 0, 0.9f, 1.2f},
-  };
+  auto hits = make_lobe_choice_hits();
   auto rng = make_rng(4242);
   for (auto& hit : hits) {
     auto wo    = vec3f{};
@@ -1442,12 +1448,7 @@ TEST(hair, guided_lobe_choice_keeps_the_albedo_and_bounds_the_weights) {
   // - every weight is A_p / P'(p) with P' the guided choice, at most
   //   1 / (1 - guided) times the unguided A_p / P(p) (1e-5 relative);
   // - all worths zero, or guided 0, draw exactly the unguided sample.
-  auto hits = std::vector<albedo_hit>{
-      {"white", {0, 0, 0}, 0.3f, 0.3f, 2, 0.5f, 0.2f},
-      {"brown", hair_sigma_a_from_melanin(1.3f, 0), 0.3f, 0.3f, 2, 0.3f, 0.4f},
-      {"smooth blond", hair_sigma_a_from_melanin(0.3f, 0), 0.05f, 0.08f, 2, -0.6f, -0.7f},
-      {"rough red", hair_sigma_a_from_melanin(0.2f, 2), 0.9f, 0.9f, 0, 0.9f, 1.2f},
-  };
+  auto hits = make_lobe_choice_hits();
   auto worths = std::vector<std::array<float, 4>>{
       {1, 0, 0, 0}, {0, 1, 1, 1}, {0.2f, 3, 0.05f, 1}, {-1, 2, 1, 0.5f}, {0, 0, 0, 0}};
   auto rng = make_rng(5151);
