@@ -24,6 +24,7 @@ resolution (delete them after changing a binary).
 """
 
 import argparse
+import json
 import math
 import os
 import shlex
@@ -31,7 +32,8 @@ import statistics
 import sys
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from run_bench import ROOT, log, parse_fields, read_pfm, run  # noqa: E402
+from efficiency import render  # noqa: E402
+from run_bench import ROOT, log, read_pfm  # noqa: E402
 
 
 def parse_variant(text):
@@ -42,24 +44,19 @@ def parse_variant(text):
     return name, words[0], words[1:]
 
 
-def render(scene, binary, flags, seed, args, output):
-    """Renders one seed (or reuses its cached files); returns its stats fields."""
-    stats_file = output + ".stats"
+def render_cached(scene, binary, flags, seed, args, output):
+    """Renders one seed with efficiency.py's render (or reuses its cached
+    files); returns its stats fields."""
+    stats_file = output + ".json"
     if not (os.path.exists(output) and os.path.exists(stats_file)):
-        command = [binary, "render", scene, "--output", output + ".tmp.pfm",
-                   "--samples", str(args.samples), "--seed", str(seed),
-                   "--resolution", str(args.resolution), "--threads", str(args.threads),
-                   "--bounces", "31", "--clamp", "0", "--quiet", "--stats"] + flags
-        stdout = run(command)
-        line = next((l for l in stdout.splitlines() if l.startswith("stats ")), None)
-        if line is None:
-            sys.exit(f"ab_variance.py: no stats line from: {' '.join(command)}")
+        stats = render(binary, scene, output + ".tmp.pfm", args.samples, args.resolution, seed,
+                       args.threads, flags)
         with open(stats_file + ".tmp", "w") as f:
-            f.write(line + "\n")
+            json.dump(stats, f)
         os.replace(output + ".tmp.pfm", output)
         os.replace(stats_file + ".tmp", stats_file)
     with open(stats_file) as f:
-        return parse_fields(f.read().strip())
+        return json.load(f)
 
 
 def pixel_moments(images):
@@ -98,10 +95,10 @@ def main():
         for name, binary, flags in variants:
             output = os.path.join(cache, f"{name}-{seed}-{args.samples}-{args.resolution}.pfm")
             log(f"{name}, seed {seed}")
-            stats[name].append(render(scene, binary, flags, seed, args, output))
+            stats[name].append(render_cached(scene, binary, flags, seed, args, output))
             images[name].append(read_pfm(output)[2])
 
-    rows, first = [], None
+    rows = []
     for name, _, _ in variants:
         means, variances = pixel_moments(images[name])
         count = len(means)
@@ -115,7 +112,7 @@ def main():
             "variances": variances,
         }
         rows.append(row)
-        first = first or row
+    first = rows[0]
     n = len(args.seeds)
     lines = [
         f"`ab_variance.py {os.path.relpath(scene, ROOT)}`: {args.resolution} pixels wide, "
