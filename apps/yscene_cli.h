@@ -97,6 +97,7 @@ struct render_options {
   bool        bvh_compact   = false;   // Embree's compact BVH
   int         curve_pieces  = 4;       // most exact pieces of a bent Bezier segment
   float       curve_piece_threshold = 1;  // bend over diameter that splits (the plan's)
+  bool        straight_cones = true;   // straight Bezier segments as Embree cones
   std::string sample_range  = "";      // A:B: render these samples as a part
 };
 

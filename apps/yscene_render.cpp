@@ -209,7 +209,8 @@ static std::string render_settings(const scene_data& scene, const trace_params& 
                      std::to_string(options.curve_pieces) +
                      (options.curve_pieces > 1 && options.curve_piece_threshold != 1
                              ? " over " + number(options.curve_piece_threshold)
-                             : ""));
+                             : "") +
+                     (options.straight_cones ? "" : " no-cones"));
   // Of Embree's configuration, only the instruction set changes a bit.
   line("isa", embree_isa(options.embree_config));
   line("bvh", options.bvh_quality + (options.no_flatten ? " instances" : " flatten") +
@@ -274,6 +275,7 @@ static int render_scene(const render_options& options, trace_params params,
   settings.bvh.embree_config    = options.embree_config;
   settings.bvh.compact          = options.bvh_compact;
   settings.bvh.max_curve_pieces = options.curve_pieces;
+  settings.bvh.straight_cones   = options.straight_cones;
   settings.curve_pieces_given   = command.count("--curve-pieces") > 0;
   settings.max_memory           = memory_limit;
   auto session = render_session{};
@@ -531,6 +533,9 @@ CLI::App* add_render_command(CLI::App& app, render_command& command, std::string
   render->add_option("--curve-pieces", options.curve_pieces,
           "give Embree bent Bezier segments as up to this many exact pieces (1: never)")
       ->check(CLI::Range(1, 4));
+  render->add_flag("--straight-cones,!--no-straight-cones", options.straight_cones,
+      "give Embree straight Bezier segments (along a line, radius affine along it) as the "
+      "truncated cones they are, intersected in closed form (the default), or as curves");
   render->add_flag("--bvh-compact", options.bvh_compact,
       "Embree's compact BVH layout (less memory, slower)");
   render->add_flag("--stats", options.stats, "print a machine-readable line of figures");

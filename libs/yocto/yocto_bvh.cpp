@@ -214,22 +214,123 @@ static int segment_pieces(float ratio, float threshold, int max_pieces) {
   return std::clamp((int)std::ceil(std::sqrt(ratio)), 2, max_pieces);
 }
 
-// Pieces of each Bezier segment, or none when nothing is split.
+// Is a Bezier segment a cone: its inner control points on the chord (their
+// distance from it bounds the curve's), at fractions a <= b within it (then
+// the position along the chord grows with the parameter), and its radius an
+// affine function of that position, both within 1e-3 of the largest radius?
+// The circles swept across the constant tangent then make the cone between
+// the end circles, whatever the parameter's speed.
+static bool straight_segment(const shape_data& shape, const vec4i& c, bvh_cone& cone) {
+  if (!element_in_range(shape, c)) return false;
+  auto q = std::array<vec4f, 4>{fiber_vertex(shape, c.x), fiber_vertex(shape, c.y),
+      fiber_vertex(shape, c.z), fiber_vertex(shape, c.w)};
+  auto chord  = vec3f(q[3]) - vec3f(q[0]);
+  auto length2 = dot(chord, chord);
+  auto radius = std::max({q[0].w, q[1].w, q[2].w, q[3].w});
+  if (!(length2 > 0) || !(radius > 0) || !std::isfinite(length2) || !std::isfinite(radius))
+    return false;
+  auto tolerance = 1e-3f * radius;
+  auto fraction  = std::array<float, 2>{};
+  for (auto k = 1; k <= 2; k++) {
+    auto offset = vec3f(q[k]) - vec3f(q[0]);
+    auto s      = dot(offset, chord) / length2;
+    auto affine = q[0].w + (q[3].w - q[0].w) * s;
+    if (!(length(offset - s * chord) <= tolerance) || !(std::abs(q[k].w - affine) <= tolerance))
+      return false;
+    fraction[k - 1] = s;
+  }
+  // Rounding may put a control point that coincides with an end a hair
+  // outside the chord.
+  const auto slack = 1e-5f;
+  if (!(fraction[0] >= -slack && fraction[0] <= fraction[1] + slack && fraction[1] <= 1 + slack))
+    return false;
+  cone.a = std::clamp(fraction[0], 0.0f, 1.0f);
+  cone.b = std::clamp(fraction[1], cone.a, 1.0f);
+  return true;
+}
+
+float cone_bezier_parameter(const bvh_cone& cone, float u) {
+  u = std::clamp(u, 0.0f, 1.0f);
+  if (!(u == u)) return 0;
+  // A uniform parameter: the fraction itself (the common middle segment of
+  // a Catmull-Rom strand).
+  if (std::abs(cone.a - 1.0f / 3) < 1e-6f && std::abs(cone.b - 2.0f / 3) < 1e-6f) return u;
+  // Newton's method kept inside a bracket that bisection narrows: the cubic
+  // 3 (1 - t)^2 t a + 3 (1 - t) t^2 b + t^3 grows from 0 to 1.
+  // Newton converges in a few steps; bisection bounds the rare flat cubic
+  // (a control point on an end) to 2^-30.
+  auto low = 0.0f, high = 1.0f, t = u;
+  for (auto iteration = 0; iteration < 30; iteration++) {
+    auto w     = 1 - t;
+    auto value = 3 * w * w * t * cone.a + 3 * w * t * t * cone.b + t * t * t - u;
+    if (std::abs(value) <= 1e-7f) break;
+    if (value > 0) high = t; else low = t;
+    auto slope = 3 * (w * w * cone.a + 2 * w * t * (cone.b - cone.a) + t * t * (1 - cone.b));
+    auto next  = slope > 0 ? t - value / slope : -1.0f;
+    t          = next > low && next < high ? next : (low + high) / 2;
+    if (high - low < 1e-7f) break;
+  }
+  return t;
+}
+
+// Pieces of each Bezier segment and its straight segments (as cones, when
+// asked), or none when nothing is split or straight.
 static bvh_curve_pieces make_curve_pieces(
-    const shape_data& shape, int max_pieces, float threshold) {
+    const shape_data& shape, int max_pieces, float threshold, bool cones) {
   auto pieces = bvh_curve_pieces{};
   max_pieces  = std::min(max_pieces, 4);  // k and n - 1 take 2 bits each
   auto count  = num_curves(shape);
-  if (count == 0 || max_pieces <= 1 || count >= (1 << 28)) return pieces;
+  if (count == 0 || (max_pieces <= 1 && !cones) || count >= (1 << 28)) return pieces;
   auto split = false;
   for (auto element = 0u; element < (uint32_t)count; element++) {
-    auto c = curve_vertices(shape, (int)element);
+    auto c    = curve_vertices(shape, (int)element);
+    auto cone = bvh_cone{element};
+    if (cones && straight_segment(shape, c, cone)) {
+      pieces.cones.push_back(cone);
+      continue;
+    }
     auto n = segment_pieces(segment_bend_ratio(shape, c), threshold, max_pieces);
     split  = split || n > 1;
     for (auto k = 0; k < n; k++) pieces.pieces.push_back(element << 4 | k << 2 | (n - 1));
   }
-  if (!split) return {};
+  if (!split && pieces.cones.empty()) return {};
   return pieces;
+}
+
+// The cones of a shape's straight segments: a cone's two vertices are its
+// segment's ends, shared with the cone before it where the strand goes on.
+// Every cone is told that it has neighbours on both sides, so that Embree
+// closes none with a disc of its own: the tube stays open, as its Bezier
+// would be, and the strand's caps close it. The buffer has a spare vertex
+// before and after, should Embree read a neighbour's.
+static RTCGeometry make_cone_geometry(
+    RTCDevice device, const shape_data& shape, const std::vector<bvh_cone>& cones) {
+  auto geometry = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_CONE_LINEAR_CURVE);
+  auto count    = cones.size();
+  auto indices  = (uint32_t*)rtcSetNewGeometryBuffer(geometry, RTC_BUFFER_TYPE_INDEX, 0,
+      RTC_FORMAT_UINT, sizeof(uint32_t), count);
+  auto flags    = (uint8_t*)rtcSetNewGeometryBuffer(geometry, RTC_BUFFER_TYPE_FLAGS, 0,
+      RTC_FORMAT_UCHAR, sizeof(uint8_t), count);
+  if (!indices || !flags) return release_unbuilt(geometry);
+  auto next = (size_t)1;
+  for (size_t i = 0; i < count; i++) {
+    auto ends   = segment_ends(shape, (int)cones[i].element);
+    auto shares = i > 0 && segment_ends(shape, (int)cones[i - 1].element).y == ends.x;
+    indices[i]  = (uint32_t)(shares ? next - 1 : next);
+    next        = indices[i] + 2;
+    flags[i]    = RTC_CURVE_FLAG_NEIGHBOR_LEFT | RTC_CURVE_FLAG_NEIGHBOR_RIGHT;
+  }
+  auto vertices = (vec4f*)rtcSetNewGeometryBuffer(geometry, RTC_BUFFER_TYPE_VERTEX, 0,
+      RTC_FORMAT_FLOAT4, sizeof(vec4f), next + 1);
+  if (!vertices) return release_unbuilt(geometry);
+  for (size_t i = 0; i < count; i++) {
+    auto ends                 = segment_ends(shape, (int)cones[i].element);
+    vertices[indices[i]]     = fiber_vertex(shape, ends.x);
+    vertices[indices[i] + 1] = fiber_vertex(shape, ends.y);
+  }
+  vertices[0]    = vertices[1];
+  vertices[next] = vertices[next - 1];
+  return geometry;
 }
 
 // Round Bezier curves from the pieces of each segment: the same polynomial
@@ -447,7 +548,9 @@ static void filter_closest_fiber_hits(const RTCFilterFunctionNArguments* args) {
 static RTCGeometry make_shape_geometry(RTCDevice device, const shape_data& shape,
     const bvh_curve_pieces& pieces, const bvh_params& params) {
   auto geometry = RTCGeometry{nullptr};
-  if (!pieces.pieces.empty()) {
+  if (!pieces.cones.empty() && pieces.pieces.empty()) {
+    // Every segment is a cone (make_shape_cones).
+  } else if (!pieces.pieces.empty()) {
     geometry = make_curve_pieces_geometry(device, shape, pieces,
         params.flat_curves ? RTC_GEOMETRY_TYPE_FLAT_BEZIER_CURVE
                            : RTC_GEOMETRY_TYPE_ROUND_BEZIER_CURVE);
@@ -481,6 +584,19 @@ static RTCGeometry make_shape_geometry(RTCDevice device, const shape_data& shape
   return geometry;
 }
 
+// The cones of a shape's straight segments, committed; null when it has none.
+// Round fibres only: a flat fibre's segments stay flat Bezier curves.
+static RTCGeometry make_shape_cones(
+    RTCDevice device, const shape_data& shape, const bvh_curve_pieces& pieces) {
+  if (pieces.cones.empty()) return nullptr;
+  auto geometry = make_cone_geometry(device, shape, pieces.cones);
+  if (!geometry) return nullptr;
+  rtcSetGeometryIntersectFilterFunction(geometry, ignore_hits_from_inside);
+  rtcSetGeometryOccludedFilterFunction(geometry, ignore_hits_from_inside);
+  rtcCommitGeometry(geometry);
+  return geometry;
+}
+
 // The discs closing a shape's strand ends, committed; null when it has none.
 // A cap is seen from outside only, round fibres or flat.
 static RTCGeometry make_shape_caps(
@@ -503,7 +619,8 @@ static void set_scene_quality(RTCScene scene, const bvh_params& params) {
                                            : RTC_BUILD_QUALITY_LOW);
 }
 
-// A shape's own scene, for instancing: the shape is geometry 0, its caps 1.
+// A shape's own scene, for instancing: the shape is geometry 0, its caps 1,
+// its cones 2.
 static RTCScene make_shape_scene(RTCDevice device, const shape_data& shape,
     const bvh_curve_pieces& pieces, const std::vector<uint32_t>& caps,
     const bvh_params& params) {
@@ -515,6 +632,10 @@ static RTCScene make_shape_scene(RTCDevice device, const shape_data& shape,
   }
   if (auto geometry = make_shape_caps(device, shape, caps)) {
     rtcAttachGeometryByID(scene, geometry, 1);
+    rtcReleaseGeometry(geometry);
+  }
+  if (auto geometry = make_shape_cones(device, shape, pieces)) {
+    rtcAttachGeometryByID(scene, geometry, 2);
     rtcReleaseGeometry(geometry);
   }
   rtcCommitScene(scene);
@@ -592,10 +713,24 @@ bool make_scene_bvh(scene_bvh& bvh, const scene_data& scene, const bvh_params& p
   bvh.shapes.resize(scene.shapes.size());
   bvh.pieces.resize(scene.shapes.size());
   bvh.caps.resize(scene.shapes.size());
+  // Embree 3's cone intersector takes the ray's direction to be of unit
+  // length (its quadratic leaves out the direction's squared length), which
+  // an instance's scaling undoes: cones only for shapes whose every instance
+  // keeps lengths.
+  auto keeps_lengths = std::vector<bool>(scene.shapes.size(), true);
+  for (auto& instance : scene.instances) {
+    auto& f     = instance.frame;
+    auto  unit  = [](const vec3f& a, const vec3f& b) { return std::abs(dot(a, b)) < 1e-5f; };
+    auto  rigid = std::abs(dot(f.x, f.x) - 1) < 1e-5f && std::abs(dot(f.y, f.y) - 1) < 1e-5f &&
+                 std::abs(dot(f.z, f.z) - 1) < 1e-5f && unit(f.x, f.y) && unit(f.y, f.z) &&
+                 unit(f.z, f.x);
+    if (!rigid) keeps_lengths[instance.shape] = false;
+  }
   for (auto i = 0; i < (int)scene.shapes.size(); i++) {
     if (users[i] == 0) continue;
-    bvh.pieces[i] = make_curve_pieces(
-        scene.shapes[i], params.max_curve_pieces, params.curve_piece_threshold);
+    bvh.pieces[i] = make_curve_pieces(scene.shapes[i], params.max_curve_pieces,
+        params.curve_piece_threshold,
+        params.straight_cones && !params.flat_curves && keeps_lengths[i]);
     bvh.caps[i]   = make_fiber_caps(scene.shapes[i]);
   }
   for (auto& instance : scene.instances) {
@@ -609,7 +744,8 @@ bool make_scene_bvh(scene_bvh& bvh, const scene_data& scene, const bvh_params& p
   bvh.scene = std::shared_ptr<void>(top, release_scene);
   set_scene_quality(top, params);
   // Geometry ids are instance indices, flat or not; the caps of a flat
-  // instance i are geometry i + the number of instances.
+  // instance i are geometry i + the number of instances, its cones i + twice
+  // that number.
   auto ninstances = (int)scene.instances.size();
   for (auto i = 0; i < ninstances; i++) {
     auto& instance = scene.instances[i];
@@ -619,6 +755,10 @@ bool make_scene_bvh(scene_bvh& bvh, const scene_data& scene, const bvh_params& p
       if (auto caps = make_shape_caps(device, shape, bvh.caps[instance.shape])) {
         rtcAttachGeometryByID(top, caps, ninstances + i);
         rtcReleaseGeometry(caps);
+      }
+      if (auto cones = make_shape_cones(device, shape, bvh.pieces[instance.shape])) {
+        rtcAttachGeometryByID(top, cones, 2 * ninstances + i);
+        rtcReleaseGeometry(cones);
       }
       geometry = make_shape_geometry(device, shape, bvh.pieces[instance.shape], params);
       if (!geometry) continue;
@@ -748,19 +888,33 @@ bool is_traceable_ray(const ray3f& ray) {
          !std::isnan(ray.tmin) && !std::isnan(ray.tmax);
 }
 
-static void init_embree_ray(RTCRay& r, const ray3f& ray) {
+// A ray for Embree with a direction of unit length (its cones need it; see
+// make_scene_bvh) and its range scaled to match; returns the direction's
+// length, which converts Embree's distances back to the ray's.
+static double init_embree_ray(RTCRay& r, const ray3f& ray) {
+  // In double: the squared length of a traceable direction neither
+  // overflows nor underflows there.
+  auto d      = ray.d;
+  auto length = 1.0;
+  auto length2 = (double)d.x * d.x + (double)d.y * d.y + (double)d.z * d.z;
+  if (std::abs(length2 - 1) > 1e-6) {
+    length = std::sqrt(length2);
+    d      = vec3f{(float)(d.x / length), (float)(d.y / length), (float)(d.z / length)};
+  }
+  auto scaled = [&](float t) { return (float)std::min(t * length, (double)flt_max); };
   r.org_x = ray.o.x;
   r.org_y = ray.o.y;
   r.org_z = ray.o.z;
-  r.dir_x = ray.d.x;
-  r.dir_y = ray.d.y;
-  r.dir_z = ray.d.z;
-  r.tnear = ray.tmin;
-  r.tfar  = ray.tmax;
+  r.dir_x = d.x;
+  r.dir_y = d.y;
+  r.dir_z = d.z;
+  r.tnear = length == 1 ? ray.tmin : scaled(ray.tmin);
+  r.tfar  = length == 1 ? ray.tmax : scaled(ray.tmax);
   r.time  = 0;
   r.mask  = (unsigned)-1;
   r.id    = 0;
   r.flags = 0;
+  return length;
 }
 
 scene_intersection intersect_scene_bvh(const scene_bvh& bvh, const ray3f& ray) {
@@ -768,7 +922,7 @@ scene_intersection intersect_scene_bvh(const scene_bvh& bvh, const ray3f& ray) {
   auto context = RTCIntersectContext{};
   rtcInitIntersectContext(&context);
   auto rayhit = RTCRayHit{};
-  init_embree_ray(rayhit.ray, ray);
+  auto length = init_embree_ray(rayhit.ray, ray);
   rayhit.hit.geomID    = RTC_INVALID_GEOMETRY_ID;
   rayhit.hit.primID    = RTC_INVALID_GEOMETRY_ID;
   rayhit.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
@@ -776,18 +930,25 @@ scene_intersection intersect_scene_bvh(const scene_bvh& bvh, const ray3f& ray) {
   if (rayhit.hit.geomID == RTC_INVALID_GEOMETRY_ID) return {};
   auto intersection = scene_intersection{};
   // Flat instances are hit as geometry `instance` of the top-level scene,
-  // their caps as `instance` + the number of instances; instanced shapes as
-  // geometry 0 of their scene, their caps as 1.
+  // their caps as `instance` + the number of instances, their cones as
+  // `instance` + twice that; instanced shapes as geometry 0 of their scene,
+  // their caps as 1, their cones as 2.
   auto ninstances = (unsigned)bvh.instance_shapes.size();
   auto instanced  = rayhit.hit.instID[0] != RTC_INVALID_GEOMETRY_ID;
-  auto cap = instanced ? rayhit.hit.geomID == 1 : rayhit.hit.geomID >= ninstances;
+  auto part = instanced ? rayhit.hit.geomID : rayhit.hit.geomID / ninstances;
+  auto cap  = part == 1, cone = part == 2;
   intersection.instance = (int)(instanced ? rayhit.hit.instID[0]
-                                          : rayhit.hit.geomID - (cap ? ninstances : 0));
+                                          : rayhit.hit.geomID - part * ninstances);
   intersection.element  = (int)rayhit.hit.primID;
   intersection.uv       = {rayhit.hit.u, rayhit.hit.v};
   auto shape            = bvh.instance_shapes[intersection.instance];
   auto& pieces          = bvh.pieces[shape].pieces;
-  if (cap) {
+  if (cone) {
+    // A straight segment's cone: the segment and its Bezier parameter.
+    auto& straight       = bvh.pieces[shape].cones[intersection.element];
+    intersection.element = (int)straight.element;
+    intersection.uv.x    = cone_bezier_parameter(straight, intersection.uv.x);
+  } else if (cap) {
     // A cap: the segment it closes, at the end it closes.
     auto packed          = bvh.caps[shape][intersection.element];
     intersection.element = (int)(packed >> 1);
@@ -799,7 +960,7 @@ scene_intersection intersect_scene_bvh(const scene_bvh& bvh, const ray3f& ray) {
     intersection.uv.x    = std::min(
         (intersection.uv.x + (float)(piece >> 2 & 3)) / (float)((piece & 3) + 1), 1.0f);
   }
-  intersection.distance = rayhit.ray.tfar;
+  intersection.distance = length == 1 ? rayhit.ray.tfar : (float)(rayhit.ray.tfar / length);
   intersection.hit      = true;
   return intersection;
 }

@@ -8,9 +8,11 @@
 // other instance uses is put in the top-level scene directly (one traversal
 // level less, the common case of hair scenes); others are Embree instances of
 // a per-shape scene. Bent Bezier segments are split into exact pieces for
-// Embree (bvh_params::max_curve_pieces). Intersections return the instance,
-// the element and Embree's parametric coordinates (mapped back from a piece
-// to its segment); fiber geometry at a hit (tangent,
+// Embree (bvh_params::max_curve_pieces); straight ones are given to it as
+// the truncated cones they are (bvh_params::straight_cones). Intersections
+// return the instance, the element and Embree's parametric coordinates
+// (mapped back from a piece or a cone to its segment); fiber geometry at a
+// hit (tangent,
 // radius, signed offset h) is computed by `eval_fiber_point` in yocto_scene.
 //
 // Rays and fibres. A round fibre (line or curve) is a tube seen from outside
@@ -30,8 +32,10 @@
 // radius, seen from outside only; a hit on it is a hit on the end segment at
 // u = 0 or 1, shaded like any hit on the fibre. Without it Embree's round
 // curves are open at the ends and miss rays along the axis, so a fibre seen
-// end-on showed a hole. Lines also keep the half sphere Embree puts around
-// a line's end; ends of radius 0 (tapered tips) have no cap.
+// end-on showed a hole. Straight segments given as cones are as open (Embree
+// is told that every cone has neighbours, so it puts no disc of its own at
+// either end) and closed by the same discs. Lines also keep the half sphere
+// Embree puts around a line's end; ends of radius 0 (tapered tips) have no cap.
 //
 
 #ifndef YOCTO_BVH_H_
@@ -66,6 +70,12 @@ struct bvh_params {
   // diameter exceeds this (1: every segment the pieces tighten; larger: only
   // the most bent; plan_curve_pieces chooses it from a budget).
   float curve_piece_threshold = 1;
+  // A round Bezier segment is the sweep of a circle across its tangent: where
+  // it runs along a straight line and its radius is an affine function of the
+  // position along it (within 1e-3 of its radius), that tube is a truncated
+  // cone, which Embree intersects in closed form instead of by subdivision
+  // (the same hits, faster rays; see make_curve_pieces).
+  bool straight_cones = true;
   std::string embree_config = "";  // Embree device configuration, e.g. "verbose=2"
   // Most bytes Embree may hold at once (0: no limit): an allocation beyond it
   // is refused and the build fails with over_budget set (the caller may try
@@ -73,12 +83,29 @@ struct bvh_params {
   double max_bytes = 0;
 };
 
+// A straight segment given to Embree as a cone from its first vertex to its
+// last: along the chord, its inner control points lie at the fractions a and
+// b (1/3 and 2/3 for a uniform parameter), which map a hit's position on the
+// cone back to the Bezier's parameter.
+struct bvh_cone {
+  uint32_t element = 0;
+  float    a = 1.0f / 3, b = 2.0f / 3;
+};
+
 // Where the pieces of a curves shape come from: piece i is the k-th of n
 // equal parts of segment e, packed as e << 4 | k << 2 | (n - 1) (one load
-// per hit). Empty when nothing is split.
+// per hit); `cones` are its straight segments, which no piece covers. Both
+// empty when nothing is split or straight (the shape's segments are given
+// as they are); pieces alone empty when every segment is a cone.
 struct bvh_curve_pieces {
   std::vector<uint32_t> pieces = {};
+  std::vector<bvh_cone> cones  = {};
 };
+
+// The Bezier parameter of a cone's hit at u, the fraction of the chord where
+// the hit's circle crosses the axis: the inverse of the cubic that maps the
+// parameter to that fraction (monotone for a cone).
+float cone_bezier_parameter(const bvh_cone& cone, float u);
 
 // Embree handles are shared pointers so that the struct copies and frees
 // itself; `memory` is what Embree holds for this scene, in bytes,

@@ -189,22 +189,26 @@ std::string format_render_stats(const render_session& session) {
   auto& state    = session.state;
   auto& bvh      = session.bvh;
   auto  segments = (size_t)0;
-  auto  pieces   = (size_t)0;  // the curves Embree got for them
+  auto  pieces   = (size_t)0;  // the Bezier curves Embree got for them
+  auto  cones    = (size_t)0;  // and the cones of the straight ones
   for (auto i = 0; i < (int)scene.shapes.size(); i++) {
     auto& shape = scene.shapes[i];
+    auto& given = bvh.pieces[i];
     segments += shape.lines.size() + num_curves(shape);
-    pieces += bvh.pieces[i].pieces.empty() ? num_curves(shape) : bvh.pieces[i].pieces.size();
+    pieces += given.pieces.empty() && given.cones.empty() ? num_curves(shape)
+                                                          : given.pieces.size();
+    cones += given.cones.size();
   }
   char buffer[2048];
   std::snprintf(buffer, sizeof(buffer),
       "stats load_seconds=%.6f bvh_seconds=%.6f bvh_bytes=%lld segments=%zu "
-      "bvh_build_peak_bytes=%lld curve_pieces=%zu width=%d height=%d spp=%d "
+      "bvh_build_peak_bytes=%lld curve_pieces=%zu cones=%zu width=%d height=%d spp=%d "
       "render_seconds=%.6f render_cpu=%.6f rays=%lld peak_memory=%lld clamped=%lld "
       "clamped_energy=%.6g roulette_threshold=%.6g adaptive=%d adaptive_gain=%.4g split=%.4g "
       "allocation_cells=%d vertices=%lld light_samples=%lld shadow_rays=%lld "
       "roulette_cells=%d roulette_plays=%lld roulette_ends=%lld",
       session.load_seconds, bvh.build_seconds, (long long)bvh.peak_memory, segments,
-      (long long)bvh.build_peak_memory, pieces, state.width, state.height, state.samples,
+      (long long)bvh.build_peak_memory, pieces, cones, state.width, state.height, state.samples,
       session.seconds, session.cpu_seconds, (long long)state.rays.load(),
       (long long)process_peak_memory(), (long long)state.clamped.load(),
       clamped_energy_fraction(state), state.roulette_threshold, state.rates.empty() ? 0 : 1,
