@@ -257,13 +257,14 @@ float cone_bezier_parameter(const bvh_cone& cone, float u) {
   if (std::abs(cone.a - 1.0f / 3) < 1e-6f && std::abs(cone.b - 2.0f / 3) < 1e-6f) return u;
   // Newton's method kept inside a bracket that bisection narrows: the cubic
   // 3 (1 - t)^2 t a + 3 (1 - t) t^2 b + t^3 grows from 0 to 1.
-  // Newton converges in a few steps; bisection bounds the rare flat cubic
-  // (a control point on an end) to 2^-30.
+  // Newton converges in three or four steps from t = u; bisection bounds
+  // the rare flat cubic (a control point on an end) to 2^-30. An error of
+  // 1e-6 in the fraction is 1e-6 of the segment along it.
   auto low = 0.0f, high = 1.0f, t = u;
   for (auto iteration = 0; iteration < 30; iteration++) {
     auto w     = 1 - t;
-    auto value = 3 * w * w * t * cone.a + 3 * w * t * t * cone.b + t * t * t - u;
-    if (std::abs(value) <= 1e-7f) break;
+    auto value = 3 * w * t * (w * cone.a + t * cone.b) + t * t * t - u;
+    if (std::abs(value) <= 1e-6f) break;
     if (value > 0) high = t; else low = t;
     auto slope = 3 * (w * w * cone.a + 2 * w * t * (cone.b - cone.a) + t * t * (1 - cone.b));
     auto next  = slope > 0 ? t - value / slope : -1.0f;
@@ -591,7 +592,14 @@ static RTCGeometry make_shape_cones(
   if (pieces.cones.empty()) return nullptr;
   auto geometry = make_cone_geometry(device, shape, pieces.cones);
   if (!geometry) return nullptr;
-  rtcSetGeometryIntersectFilterFunction(geometry, ignore_hits_from_inside);
+  // Where every segment is a cone, a cone's index is its segment's, and
+  // closest hits start fetching the segment's vertices as curves' do.
+  if (pieces.cones.size() == (size_t)num_curves(shape)) {
+    rtcSetGeometryIntersectFilterFunction(geometry, filter_closest_fiber_hits);
+    rtcSetGeometryUserData(geometry, (void*)&shape);
+  } else {
+    rtcSetGeometryIntersectFilterFunction(geometry, ignore_hits_from_inside);
+  }
   rtcSetGeometryOccludedFilterFunction(geometry, ignore_hits_from_inside);
   rtcCommitGeometry(geometry);
   return geometry;
