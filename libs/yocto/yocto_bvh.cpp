@@ -250,16 +250,16 @@ static bool straight_segment(const shape_data& shape, const vec4i& c, bvh_cone& 
 }
 
 float cone_bezier_parameter(const bvh_cone& cone, float u) {
+  if (std::isnan(u)) return 0;
   u = std::clamp(u, 0.0f, 1.0f);
-  if (!(u == u)) return 0;
   // A uniform parameter: the fraction itself (the common middle segment of
   // a Catmull-Rom strand).
   if (std::abs(cone.a - 1.0f / 3) < 1e-6f && std::abs(cone.b - 2.0f / 3) < 1e-6f) return u;
-  // Newton's method kept inside a bracket that bisection narrows: the cubic
-  // 3 (1 - t)^2 t a + 3 (1 - t) t^2 b + t^3 grows from 0 to 1.
-  // Newton converges in three or four steps from t = u; bisection bounds
-  // the rare flat cubic (a control point on an end) to 2^-30. An error of
-  // 1e-6 in the fraction is 1e-6 of the segment along it.
+  // The cubic 3 (1 - t)^2 t a + 3 (1 - t) t^2 b + t^3 grows from 0 to 1:
+  // Newton's method from t = u (three or four steps), kept inside a bracket
+  // that bisection narrows where it would leave it (a flat cubic, with a
+  // control point on an end). An error of 1e-6 in the fraction is 1e-6 of
+  // the segment along it.
   auto low = 0.0f, high = 1.0f, t = u;
   for (auto iteration = 0; iteration < 30; iteration++) {
     auto w     = 1 - t;
@@ -728,10 +728,9 @@ bool make_scene_bvh(scene_bvh& bvh, const scene_data& scene, const bvh_params& p
   auto keeps_lengths = std::vector<bool>(scene.shapes.size(), true);
   for (auto& instance : scene.instances) {
     auto& f     = instance.frame;
-    auto  unit  = [](const vec3f& a, const vec3f& b) { return std::abs(dot(a, b)) < 1e-5f; };
-    auto  rigid = std::abs(dot(f.x, f.x) - 1) < 1e-5f && std::abs(dot(f.y, f.y) - 1) < 1e-5f &&
-                 std::abs(dot(f.z, f.z) - 1) < 1e-5f && unit(f.x, f.y) && unit(f.y, f.z) &&
-                 unit(f.z, f.x);
+    auto  near = [](float a, float b) { return std::abs(a - b) < 1e-5f; };
+    auto  rigid = near(dot(f.x, f.x), 1) && near(dot(f.y, f.y), 1) && near(dot(f.z, f.z), 1) &&
+                 near(dot(f.x, f.y), 0) && near(dot(f.y, f.z), 0) && near(dot(f.z, f.x), 0);
     if (!rigid) keeps_lengths[instance.shape] = false;
   }
   for (auto i = 0; i < (int)scene.shapes.size(); i++) {
