@@ -734,6 +734,30 @@ TEST(bvh, bent_curves_split_into_exact_pieces_hit_like_whole_ones) {
   }
 }
 
+// Packed strands of one length have their curves' first vertices computed
+// (fiber_strand_segments); strands of different lengths keep them stored.
+// Either way every curve's four vertices are the unpacked shape's.
+TEST(geometry, packed_strands_compute_or_store_their_first_vertices) {
+  for (auto lengths : {std::vector<int>{4, 4, 4}, std::vector<int>{4, 6, 3}}) {
+    auto shape = shape_data{};
+    for (auto s = 0; s < (int)lengths.size(); s++) {
+      auto points = std::vector<vec3f>{};
+      for (auto k = 0; k < lengths[s]; k++) points.push_back({(float)s, 0.1f * k * k, 0.2f * k});
+      append_catmull_rom_strand(shape, points, std::vector<float>(points.size(), 0.01f));
+    }
+    auto packed = shape;
+    pack_fiber_vertices(packed);
+    auto same = lengths[0] == lengths[1] && lengths[1] == lengths[2];
+    EXPECT_EQ(packed.fiber_strand_segments, same ? lengths[0] - 1 : 0);
+    ASSERT_EQ(num_curves(packed), (int)shape.curves.size());
+    for (auto i = 0; i < num_curves(packed); i++)
+      EXPECT_EQ(curve_vertices(packed, i), shape.curves[i]);
+    unpack_fiber_vertices(packed);
+    EXPECT_EQ(packed.fiber_strand_segments, 0);
+    EXPECT_EQ(packed.curves, shape.curves);
+  }
+}
+
 // Straight Bezier segments (strands along lines, tapered or with uneven
 // steps between their Catmull-Rom points, so that the parameter's speed
 // varies along a segment) are given to
@@ -1060,6 +1084,13 @@ TEST(bvh, packed_fibres_hit_and_shade_like_unpacked_ones) {
       broken.shapes[hair].fiber_curves.back() = num_vertices(fibre) - 3;
       EXPECT_FALSE(validate_scene(broken, valid_error));
       EXPECT_NE(valid_error.find("references vertex"), std::string::npos) << valid_error;
+      // Strands of one length: first vertices computed, and checked against
+      // the stored ones.
+      EXPECT_GT(fibre.fiber_strand_segments, 0);
+      auto shifted = packed;
+      shifted.shapes[hair].fiber_strand_segments += 1;
+      EXPECT_FALSE(validate_scene(shifted, valid_error));
+      EXPECT_NE(valid_error.find("segments put it"), std::string::npos) << valid_error;
     }
 
     for (auto pieces : {1, 4}) {

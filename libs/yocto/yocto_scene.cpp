@@ -370,6 +370,14 @@ void pack_fiber_vertices(shape_data& shape) {
   shape.fiber_curves.resize(shape.curves.size());
   for (size_t i = 0; i < shape.curves.size(); i++) shape.fiber_curves[i] = shape.curves[i].x;
   std::vector<vec4i>{}.swap(shape.curves);
+  // Strands of one length, one after the other: the first strand's
+  // segments (curves whose first vertices step by 3), then every curve checked.
+  auto count = (int)shape.fiber_curves.size(), n = 1;
+  while (n < count && shape.fiber_curves[n] == shape.fiber_curves[n - 1] + 3) n++;
+  auto regular = count < (1 << 29);
+  for (auto e = 0; e < count && regular; e++)
+    regular = shape.fiber_curves[e] == 3 * e + e / n;
+  shape.fiber_strand_segments = regular ? n : 0;
 }
 void pack_fiber_vertices(scene_data& scene) {
   for (auto& shape : scene.shapes) pack_fiber_vertices(shape);
@@ -391,6 +399,7 @@ void unpack_fiber_vertices(shape_data& shape) {
   }
   std::vector<vec4f>{}.swap(shape.fiber_vertices);
   std::vector<int>{}.swap(shape.fiber_curves);
+  shape.fiber_strand_segments = 0;
 }
 
 bbox3f compute_bounds(const scene_data& scene) {
@@ -599,6 +608,14 @@ bool validate_scene(const scene_data& scene, std::string& error) {
       if (first < 0 || first > nverts - 4) {
         error = name + ": curve " + std::to_string(c) + " references vertex " +
                 std::to_string(first < 0 ? first : first + 3) + " of " + std::to_string(nverts);
+        return false;
+      }
+      // The computed first vertex (fiber_strand_segments) must be the stored one.
+      auto n = shape.fiber_strand_segments;
+      if (n > 0 && first != 3 * c + c / n) {
+        error = name + ": curve " + std::to_string(c) + " starts at vertex " +
+                std::to_string(first) + ", not where strands of " + std::to_string(n) +
+                " segments put it";
         return false;
       }
     }

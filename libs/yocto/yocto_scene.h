@@ -90,6 +90,10 @@ struct shape_data {
   // are consecutive (strands), each one's first vertex in place of curves.
   std::vector<vec4f> fiber_vertices = {};
   std::vector<int>   fiber_curves   = {};
+  // When every packed strand has this many segments, one strand after the
+  // other (3 n + 1 vertices each), curve e's first vertex is 3 e + e / n:
+  // computed, not read (a dependent cache miss per hit). 0 otherwise.
+  int fiber_strand_segments = 0;
 };
 
 struct instance_data {
@@ -369,7 +373,8 @@ inline int num_curves(const shape_data& shape) {
 }
 inline vec4i curve_vertices(const shape_data& shape, int element) {
   if (shape.fiber_curves.empty()) return shape.curves[element];
-  auto first = shape.fiber_curves[element];
+  auto n     = shape.fiber_strand_segments;
+  auto first = n > 0 ? 3 * element + element / n : shape.fiber_curves[element];
   return {first, first + 1, first + 2, first + 3};
 }
 // A fibre segment's first and last vertex (a line's two, a curve's ends).
