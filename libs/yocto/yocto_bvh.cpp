@@ -899,13 +899,13 @@ bool is_traceable_ray(const ray3f& ray) {
 // make_scene_bvh) and its range scaled to match; returns the direction's
 // length, which converts Embree's distances back to the ray's.
 static double init_embree_ray(RTCRay& r, const ray3f& ray) {
-  // In double: the squared length of a traceable direction neither
-  // overflows nor underflows there.
+  // The rescaling in double: the squared length of a traceable direction
+  // neither overflows nor underflows there (in float it may: then it is not
+  // near 1 either).
   auto d      = ray.d;
   auto length = 1.0;
-  auto length2 = (double)d.x * d.x + (double)d.y * d.y + (double)d.z * d.z;
-  if (std::abs(length2 - 1) > 1e-6) {
-    length = std::sqrt(length2);
+  if (std::abs(dot(d, d) - 1) > 1e-6f) {
+    length = std::sqrt((double)d.x * d.x + (double)d.y * d.y + (double)d.z * d.z);
     d      = vec3f{(float)(d.x / length), (float)(d.y / length), (float)(d.z / length)};
   }
   auto scaled = [&](float t) { return (float)std::min(t * length, (double)flt_max); };
