@@ -681,6 +681,22 @@ TEST(scene, validation_refuses_what_the_ray_tracer_cannot_trace) {
   expect_refused(light, {"distant light 0", "direction [0 0 0]"});
 }
 
+// A ray at a random point of the box from `corner` spanning `size`, from a
+// random direction 3 units away.
+static ray3f random_ray_into_box(rng_state& rng, const vec3f& corner, const vec3f& size) {
+  auto target = corner + rand3f(rng) * size;
+  auto origin = target + sample_sphere(rand2f(rng)) * 3.0f;
+  return {origin, normalize(target - origin)};
+}
+// Do two BVHs' answers agree: both miss, or both hit the same instance and
+// element at the same parameter (within 1e-3) and distance (within 1e-4)?
+static bool same_hit(const scene_intersection& a, const scene_intersection& b) {
+  if (a.hit != b.hit) return false;
+  return !a.hit || (a.instance == b.instance && a.element == b.element &&
+                       std::abs(a.uv.x - b.uv.x) <= 1e-3f &&
+                       std::abs(a.distance - b.distance) <= 1e-4f);
+}
+
 TEST(bvh, bent_curves_split_into_exact_pieces_hit_like_whole_ones) {
   // Helical strands of Bezier segments (quarter turns, radius 0.02 against a
   // helix of radius 0.3) are given to Embree in pieces (max_curve_pieces 4)
@@ -719,15 +735,11 @@ TEST(bvh, bent_curves_split_into_exact_pieces_hit_like_whole_ones) {
     auto rng = make_rng(17);
     auto hits = 0, disagree = 0;
     for (auto i = 0; i < 20000; i++) {
-      auto target = vec3f{-0.4f, -0.1f, -0.4f} + rand3f(rng) * vec3f{1.6f, 1.5f, 0.8f + 2 * instanced};
-      auto origin = target + sample_sphere(rand2f(rng)) * 3.0f;
-      auto ray    = ray3f{origin, normalize(target - origin)};
+      auto ray = random_ray_into_box(
+          rng, {-0.4f, -0.1f, -0.4f}, {1.6f, 1.5f, 0.8f + 2 * instanced});
       auto a = intersect_scene_bvh(whole, ray), b = intersect_scene_bvh(split, ray);
       hits += a.hit;
-      if (a.hit != b.hit || (a.hit && (a.instance != b.instance || a.element != b.element ||
-                                          std::abs(a.uv.x - b.uv.x) > 1e-3f ||
-                                          std::abs(a.distance - b.distance) > 1e-4f)))
-        disagree++;
+      if (!same_hit(a, b)) disagree++;
     }
     EXPECT_GT(hits, 500);
     EXPECT_LE(disagree, 40) << "of " << hits << " hits";
@@ -816,15 +828,12 @@ TEST(bvh, straight_segments_as_cones_hit_like_bezier_curves) {
     EXPECT_FALSE(cones.pieces[1].pieces.empty());
     auto hits = 0, disagree = 0;
     for (auto i = 0; i < 20000; i++) {
-      auto target = vec3f{-0.5f, -0.5f, -0.5f} + rand3f(rng) * vec3f{1.8f, 1.8f, 1.6f + 1.5f * instanced};
-      auto origin = target + sample_sphere(rand2f(rng)) * 3.0f;
-      auto ray    = ray3f{origin, normalize(target - origin)};
+      auto ray = random_ray_into_box(
+          rng, {-0.5f, -0.5f, -0.5f}, {1.8f, 1.8f, 1.6f + 1.5f * instanced});
       auto a = intersect_scene_bvh(curves, ray), b = intersect_scene_bvh(cones, ray);
       hits += a.hit;
-      auto same = a.hit == b.hit;
+      auto same = same_hit(a, b);
       if (same && a.hit) {
-        same = a.instance == b.instance && a.element == b.element &&
-               std::abs(a.uv.x - b.uv.x) <= 1e-3f && std::abs(a.distance - b.distance) <= 1e-4f;
         auto& instance = scene.instances[a.instance];
         auto  fa = eval_fiber_point(scene, instance, a.element, a.uv.x, ray, a.distance);
         auto  fb = eval_fiber_point(scene, instance, b.element, b.uv.x, ray, b.distance);
