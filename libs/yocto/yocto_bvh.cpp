@@ -106,6 +106,12 @@ static vec4f fiber_vertex(const shape_data& shape, int index) {
   return {shape.positions[index], r};
 }
 
+// A curve's four control points as Embree's float4 (position, radius).
+static std::array<vec4f, 4> curve_control_points(const shape_data& shape, const vec4i& c) {
+  return {fiber_vertex(shape, c.x), fiber_vertex(shape, c.y), fiber_vertex(shape, c.z),
+      fiber_vertex(shape, c.w)};
+}
+
 // Do all of an element's vertex indices fall within the shape's vertices?
 template <typename Element>
 static bool element_in_range(const shape_data& shape, const Element& element) {
@@ -222,8 +228,7 @@ static int segment_pieces(float ratio, float threshold, int max_pieces) {
 // the end circles, whatever the parameter's speed.
 static bool straight_segment(const shape_data& shape, const vec4i& c, bvh_cone& cone) {
   if (!element_in_range(shape, c)) return false;
-  auto q = std::array<vec4f, 4>{fiber_vertex(shape, c.x), fiber_vertex(shape, c.y),
-      fiber_vertex(shape, c.z), fiber_vertex(shape, c.w)};
+  auto q      = curve_control_points(shape, c);
   auto chord  = vec3f(q[3]) - vec3f(q[0]);
   auto length2 = dot(chord, chord);
   auto radius = std::max({q[0].w, q[1].w, q[2].w, q[3].w});
@@ -371,8 +376,7 @@ static RTCGeometry make_curve_pieces_geometry(RTCDevice device, const shape_data
       for (auto j = 0; j < 4; j++) v[j] = {0, 0, 0, 0};
       continue;
     }
-    auto q = std::array<vec4f, 4>{fiber_vertex(shape, c.x), fiber_vertex(shape, c.y),
-        fiber_vertex(shape, c.z), fiber_vertex(shape, c.w)};
+    auto q = curve_control_points(shape, c);
     auto point = [&](float u) {
       auto w = 1 - u;
       return w * w * w * q[0] + 3 * w * w * u * q[1] + 3 * w * u * u * q[2] + u * u * u * q[3];
