@@ -199,6 +199,8 @@ static std::string render_settings(const scene_data& scene, const trace_params& 
   // Only when off, so that the settings of default renders stay as they were.
   if (!params.roulette_cache) line("roulette_cache", "off");
   line("lobe_guide", number(params.lobe_guide));
+  // Only when on, so that the settings of default renders stay as they were.
+  if (params.roulette_control) line("roulette_control", "on");
   line("hair", std::string(params.hair_sampling.four_numbers ? "four-numbers" : "demux") +
                    (params.hair_sampling.per_hit ? " per-hit" : "") +
                    (params.hair_sampling.mixture_weight ? " mixture-weight" : "") +
@@ -485,6 +487,11 @@ CLI::App* add_render_command(CLI::App& app, render_command& command, std::string
       "Russian roulette by region and direction from the tails the pilot measured there "
       "(EARS: each path survives with the probability that maximises efficiency, the "
       "default), or the pilot's one threshold everywhere");
+  render->add_flag("--roulette-control,!--no-roulette-control", params.roulette_control,
+      "an ended path adds the mean its tail was expected to bring, as the roulette cache "
+      "learned it, and a surviving one the difference (a control variate: unbiased, less "
+      "noise for the rays, but a dark pixel may be slightly negative at low sample counts), "
+      "or ended paths add nothing (the default)");
   render->add_option("--lobe-guide", params.lobe_guide,
           "share of a hair lobe's choice made by what the roulette cache expects its "
           "direction to be worth per unit cost (0 = by the lobes' luminance alone; at most "

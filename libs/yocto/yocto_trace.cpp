@@ -304,6 +304,7 @@ static sequence_state make_pixel_sequence(const trace_context& context,
 // the direction the tail leaves it in.
 struct trace_roulette_point {
   float   weight    = 0;
+  vec3f   throughput = {0, 0, 0};
   float   survive   = 1;
   vec3f   radiance  = {0, 0, 0};
   int64_t rays      = 0;
@@ -313,12 +314,16 @@ struct trace_roulette_point {
 
 // A pilot's tail for the roulette cache: where it left from, in which
 // direction, and its squared radiance per unit throughput and its rays, each
-// already weighted by the pilot's own roulette.
+// already weighted by the pilot's own roulette; its radiance per unit
+// throughput (so weighted too) and the throughput's colour (the throughput
+// over its largest component), for the control variate.
 struct trace_tail_record {
   vec3f position  = {0, 0, 0};
   vec3f direction = {0, 0, 0};
   float moment    = 0;
   float cost      = 0;
+  vec3f tail      = {0, 0, 0};
+  vec3f colour    = {0, 0, 0};
 };
 
 // A shadow ray a pilot path cast: the point it left and whether it reached
@@ -394,11 +399,27 @@ static float eval_tail_worth(const std::array<float, 8>& tail, const vec3f& dire
   return std::sqrt(std::max(moment, 0.0f) / std::max(cost, 1.0f));
 }
 
-// roulette_survival in a cell already found.
+// A cell's control variate in a direction: the mean tail per unit
+// throughput, at least zero (any mu keeps the estimate unbiased; a negative
+// one could only be a fit's error).
+static vec3f eval_tail_mean(const std::array<float, 16>& control, const vec3f& direction) {
+  auto mean = vec3f{0, 0, 0};
+  for (auto c = 0; c < 3; c++)
+    mean[c] = std::max(control[4 * c] + control[4 * c + 1] * direction.x +
+                           control[4 * c + 2] * direction.y + control[4 * c + 3] * direction.z,
+        0.0f);
+  return mean;
+}
+
+// roulette_survival in a cell already found: sqrt(R / c) with a control
+// variate, sqrt(M2 / c) without.
 static float roulette_survival(
     const trace_roulette_cache& cache, int cell, const vec3f& direction, float weight) {
   if (cell < 0 || !(weight > 0)) return std::min(std::max(weight, 0.0f), 1.0f);
-  auto survive = weight * eval_tail_worth(cache.tails[cell], direction) / cache.pixel_deviation;
+  auto tail = cache.tails[cell];
+  if (!cache.controls.empty())
+    for (auto i = 0; i < 4; i++) tail[i] = cache.controls[cell][12 + i];
+  auto survive = weight * eval_tail_worth(tail, direction) / cache.pixel_deviation;
   // As the global threshold's clamp: never below the throughput itself,
   // nor above 16 times it.
   survive = std::clamp(survive, weight, 16 * weight);
@@ -567,14 +588,21 @@ static void scatter_path(const trace_walk& walk, material_point point, ray3f ray
                             : max_component(weight) / threshold;
     if (bounce >= params.roulette_bounce) {
       if (points)
-        points->push_back({max_component(weight), std::min(survive, 1.0f), radiance, rays,
-            point.position, incoming});
+        points->push_back({max_component(weight), weight, std::min(survive, 1.0f), radiance,
+            rays, point.position, incoming});
       if (survive < 1) {
         if (tally) tally->roulette_plays++;
+        // The control variate: what the tail is expected to bring now, and
+        // the difference from it if the path goes on.
+        auto controlled = cell >= 0 && roulette && !roulette->controls.empty();
+        auto control    = controlled ? weight * eval_tail_mean(roulette->controls[cell], incoming)
+                                     : vec3f{0, 0, 0};
         if (lobe_roulette.y >= survive) {
           if (tally) tally->roulette_ends++;
+          if (controlled) radiance += control;
           break;
         }
+        if (controlled) radiance += control * (1 - 1 / survive);
         weight /= survive;
       }
     }
@@ -904,52 +932,116 @@ static bool solve_ridge_system(std::array<double, 16> a, std::array<double, 4>& 
   return true;
 }
 
+// a + b . d by least squares over points (1, d) with a ridge worth `ridge`
+// of them towards a = prior, b = 0, given X^T X and X^T y; the prior where
+// the system cannot be solved.
+static std::array<float, 4> fit_ridge_line(const std::array<double, 16>& normal,
+    const std::array<double, 4>& targets, double ridge, double prior) {
+  auto a = normal;
+  for (auto i = 0; i < 4; i++) a[i * 4 + i] += ridge;
+  auto line = targets;
+  line[0] += ridge * prior;
+  if (!solve_ridge_system(a, line)) line = {prior, 0, 0, 0};
+  return {(float)line[0], (float)line[1], (float)line[2], (float)line[3]};
+}
+
+// Adds a point x = (1, d) to X^T X, and its value y to X^T y.
+static void add_line_point(std::array<double, 16>& normal, const vec3f& direction) {
+  auto x = std::array<double, 4>{1, direction.x, direction.y, direction.z};
+  for (auto i = 0; i < 4; i++)
+    for (auto k = 0; k < 4; k++) normal[i * 4 + k] += x[i] * x[k];
+}
+static void add_line_value(std::array<double, 4>& targets, const vec3f& direction, double value) {
+  auto x = std::array<double, 4>{1, direction.x, direction.y, direction.z};
+  for (auto i = 0; i < 4; i++) targets[i] += x[i] * value;
+}
+
 // The roulette cache from the pilot's tails (see trace_roulette_cache): a
 // grid of cells of about 1,024 tails each on average (at most 16 a side);
 // in each cell, M2 and c fitted as a + b . d by least squares with a ridge
 // of 16 tails' weight towards the whole scene's means (a = mean, b = 0), so
-// that a cell of few tails keeps near them.
+// that a cell of few tails keeps near them. With `control`, the control
+// variate the same way (see trace_roulette_cache): per cell the mean tail
+// per unit throughput of each channel, then the tails' second moment about
+// it, each tail's E[(T - w mu)^2] estimated without bias as
+// M2 - 2 T . (w mu) / 3 + |w mu|^2 / 3 from its roulette-weighted T and M2.
 static trace_roulette_cache make_roulette_cache(
     const std::vector<std::vector<trace_tail_record>>& rows, double pixel_deviation,
-    double scene_moment, double scene_cost) {
+    double scene_moment, double scene_cost, bool control) {
   auto cache = trace_roulette_cache{};
   if (!(pixel_deviation > 0) || !std::isfinite(pixel_deviation) || !(scene_moment > 0) ||
       !(scene_cost > 0))
     return cache;
   if (!make_record_grid(rows, 1024, 16, cache.bounds, cache.cells, cache.cell_scale)) return {};
   cache.pixel_deviation = (float)pixel_deviation;
-  auto cells   = cache.cells;
-  auto ncells  = (size_t)cells.x * cells.y * cells.z;
-  // Per cell: X^T X (4 x 4) and X^T y for the two fits, X = (1, d).
+  auto cells  = cache.cells;
+  auto ncells = (size_t)cells.x * cells.y * cells.z;
+  auto ridge  = 16.0;
+  // Per cell: X^T X and X^T y of the fits, X = (1, d); all tails share X.
   auto normal  = std::vector<std::array<double, 16>>(ncells);
-  auto targets = std::vector<std::array<double, 8>>(ncells);
+  auto moments = std::vector<std::array<double, 4>>(ncells);
+  auto costs   = std::vector<std::array<double, 4>>(ncells);
   for (auto& row : rows) {
     for (auto& tail : row) {
       auto cell = find_roulette_cell(cache, tail.position);
       if (cell < 0) continue;
-      auto x = std::array<double, 4>{1, tail.direction.x, tail.direction.y, tail.direction.z};
-      for (auto i = 0; i < 4; i++) {
-        for (auto k = 0; k < 4; k++) normal[cell][i * 4 + k] += x[i] * x[k];
-        targets[cell][i] += x[i] * tail.moment;
-        targets[cell][4 + i] += x[i] * tail.cost;
+      add_line_point(normal[cell], tail.direction);
+      add_line_value(moments[cell], tail.direction, tail.moment);
+      add_line_value(costs[cell], tail.direction, tail.cost);
+    }
+  }
+  cache.tails.resize(ncells);
+  for (size_t cell = 0; cell < ncells; cell++) {
+    auto moment = fit_ridge_line(normal[cell], moments[cell], ridge, scene_moment);
+    auto cost   = fit_ridge_line(normal[cell], costs[cell], ridge, scene_cost);
+    for (auto i = 0; i < 4; i++) cache.tails[cell][i] = moment[i], cache.tails[cell][4 + i] = cost[i];
+  }
+  if (!control) return cache;
+
+  // The means: per channel, the tail over the channel's throughput, fitted
+  // where that throughput is not zero.
+  auto mean_normal  = std::vector<std::array<std::array<double, 16>, 3>>(ncells);
+  auto mean_targets = std::vector<std::array<std::array<double, 4>, 3>>(ncells);
+  auto scene_mean = glm::dvec3{0, 0, 0}, scene_count = glm::dvec3{0, 0, 0};
+  for (auto& row : rows) {
+    for (auto& tail : row) {
+      auto cell = find_roulette_cell(cache, tail.position);
+      if (cell < 0) continue;
+      for (auto c = 0; c < 3; c++) {
+        if (!(tail.colour[c] > 0)) continue;
+        auto value = (double)tail.tail[c] / tail.colour[c];
+        add_line_point(mean_normal[cell][c], tail.direction);
+        add_line_value(mean_targets[cell][c], tail.direction, value);
+        scene_mean[c] += value, scene_count[c] += 1;
       }
     }
   }
-  auto ridge = 16.0;
-  cache.tails.resize(ncells);
+  scene_mean /= glm::max(scene_count, glm::dvec3{1, 1, 1});
+  cache.controls.resize(ncells);
   for (size_t cell = 0; cell < ncells; cell++) {
-    auto a = normal[cell];
-    for (auto i = 0; i < 4; i++) a[i * 4 + i] += ridge;
-    auto moment = std::array<double, 4>{targets[cell][0] + ridge * scene_moment, targets[cell][1],
-        targets[cell][2], targets[cell][3]};
-    auto cost = std::array<double, 4>{targets[cell][4] + ridge * scene_cost, targets[cell][5],
-        targets[cell][6], targets[cell][7]};
-    if (!solve_ridge_system(a, moment) || !solve_ridge_system(a, cost))
-      moment = {scene_moment, 0, 0, 0}, cost = {scene_cost, 0, 0, 0};
-    for (auto i = 0; i < 4; i++) {
-      cache.tails[cell][i]     = (float)moment[i];
-      cache.tails[cell][4 + i] = (float)cost[i];
+    for (auto c = 0; c < 3; c++) {
+      auto mean = fit_ridge_line(mean_normal[cell][c], mean_targets[cell][c], ridge, scene_mean[c]);
+      for (auto i = 0; i < 4; i++) cache.controls[cell][4 * c + i] = mean[i];
     }
+  }
+  // The second moments about the means, fitted as M2 was.
+  auto residuals      = std::vector<std::array<double, 4>>(ncells);
+  auto scene_residual = 0.0, residual_count = 0.0;
+  for (auto& row : rows) {
+    for (auto& tail : row) {
+      auto cell = find_roulette_cell(cache, tail.position);
+      if (cell < 0) continue;
+      auto expected = glm::dvec3(tail.colour * eval_tail_mean(cache.controls[cell], tail.direction));
+      auto residual = tail.moment - 2 * glm::dot(glm::dvec3(tail.tail), expected) / 3 +
+                      glm::dot(expected, expected) / 3;
+      add_line_value(residuals[cell], tail.direction, residual);
+      scene_residual += residual, residual_count += 1;
+    }
+  }
+  scene_residual = std::max(scene_residual / std::max(residual_count, 1.0), 0.0);
+  for (size_t cell = 0; cell < ncells; cell++) {
+    auto residual = fit_ridge_line(normal[cell], residuals[cell], ridge, scene_residual);
+    for (auto i = 0; i < 4; i++) cache.controls[cell][12 + i] = residual[i];
   }
   return cache;
 }
@@ -1039,8 +1131,10 @@ trace_pilot run_trace_pilot(const scene_data& scene, const scene_bvh& bvh,
               sums[4] += moment;
               sums[5] += cost;
               sums[6] += 1;
-              if (params.roulette_cache && std::isfinite(moment) && std::isfinite(cost))
-                tails.push_back({point.position, point.direction, (float)moment, (float)cost});
+              if (params.roulette_cache && std::isfinite(moment) && std::isfinite(cost) &&
+                  isfinite(vec3f(tail)))
+                tails.push_back({point.position, point.direction, (float)moment, (float)cost,
+                    vec3f(tail), point.throughput / point.weight});
             }
           }
           means[set] = set_sum / (double)pilot_samples;
@@ -1071,7 +1165,8 @@ trace_pilot run_trace_pilot(const scene_data& scene, const scene_bvh& bvh,
         make_trace_allocation(row_shadows, std::sqrt(pixel_variance / pixel_cost));
   if (params.roulette_cache)
     pilot_result.roulette_cache = make_roulette_cache(
-        row_tails, std::sqrt(pixel_variance / pixel_cost), tail_moment, tail_cost);
+        row_tails, std::sqrt(pixel_variance / pixel_cost), tail_moment, tail_cost,
+        params.roulette_control);
   return pilot_result;
 }
 

@@ -104,6 +104,12 @@ struct trace_params {
   // MIS needs the BSDF's pdf (see sample_hair_scattering_weight); 0 for the
   // luminance choice alone. Needs the roulette cache.
   float              lobe_guide = 0.5f;
+  // The roulette takes the roulette cache's mean tail as a control variate
+  // (see trace_roulette_cache): an ended path adds what its tail was
+  // expected to bring, a surviving one the difference; off (the default, as
+  // a sample, and at low sample counts a pixel, may then be negative):
+  // ended paths add nothing. Needs the roulette cache.
+  bool               roulette_control = false;
 };
 
 }  // namespace yocto
@@ -188,6 +194,14 @@ struct trace_roulette_cache {
   float              pixel_deviation = 0;          // sqrt(V / C)
   // Per cell: M2 = a + b . d (a, b.x, b.y, b.z), then c the same way.
   std::vector<std::array<float, 8>> tails = {};
+  // With params.roulette_control, per cell: the tail's mean radiance per unit
+  // of throughput, mu = a + b . d per channel (red's a, b.x, b.y, b.z, then
+  // green's, blue's), and its second moment about w mu, R = a + b . d. A path
+  // of throughput w that the roulette ends adds w mu (x, d); one that
+  // survives with probability q adds w mu (1 - 1 / q) and goes on weighted
+  // by 1 / q: unbiased for any mu, and the roulette's variance is
+  // w^2 (1 / q - 1) R instead of w^2 (1 / q - 1) M2, so q follows R.
+  std::vector<std::array<float, 16>> controls = {};
 };
 
 // The cell of a point in the cache's grid, as find_allocation_cell.
