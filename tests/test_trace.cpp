@@ -721,6 +721,19 @@ static std::pair<double, int64_t> variance_between_seeds(
   return {variance / (3 * pixels), rays};
 }
 
+// variance_between_seeds of 8 seeds, times their rays, of `params` over
+// that of `other` (printed as a figure named `what`).
+static double variance_times_rays_ratio(const scene_data& scene, const trace_params& params,
+    const trace_params& other, const std::string& what) {
+  auto [variance, rays]             = variance_between_seeds(scene, params, 8);
+  auto [other_variance, other_rays] = variance_between_seeds(scene, other, 8);
+  auto ratio = variance * rays / (other_variance * other_rays);
+  std::printf("[ figure ] %s: variance %.3e against %.3e, rays %lld against %lld, variance x "
+              "rays %.3f\n",
+      what.c_str(), variance, other_variance, (long long)rays, (long long)other_rays, ratio);
+  return ratio;
+}
+
 static scene_data make_walled_hair_scene() {
   auto scene = make_hair_test_scene();
   scene.shapes[1]    = make_quad_shape({20, 20});
@@ -820,17 +833,11 @@ TEST(trace, roulette_control_keeps_the_mean_and_lowers_the_noise) {
   auto plain                        = render_scene(scene, params);
   EXPECT_NE(controlled.image.pixels, plain.image.pixels);
   expect_same_mean(controlled, plain, "roulette with and without its control variate");
-  params.samples                          = 16;
-  params.roulette_control                 = true;
-  auto [controlled_variance, controlled_rays] = variance_between_seeds(scene, params, 8);
-  params.roulette_control                 = false;
-  auto [plain_variance, plain_rays]       = variance_between_seeds(scene, params, 8);
-  auto ratio = controlled_variance * controlled_rays / (plain_variance * plain_rays);
-  std::printf("[ figure ] roulette control variate: variance %.3e against %.3e, rays %lld "
-              "against %lld, variance x rays %.3f\n",
-      controlled_variance, plain_variance, (long long)controlled_rays, (long long)plain_rays,
-      ratio);
-  EXPECT_LT(ratio, 0.97);
+  params.samples          = 16;
+  params.roulette_control = true;
+  auto without            = params;
+  without.roulette_control = false;
+  EXPECT_LT(variance_times_rays_ratio(scene, params, without, "roulette control variate"), 0.97);
 }
 
 TEST(trace, roulette_cache_keeps_the_mean_and_saves_rays) {
@@ -2068,16 +2075,11 @@ TEST(trace, lobe_guide_keeps_the_mean_and_lowers_the_noise) {
   EXPECT_EQ(guided.nonfinite, 0);
   EXPECT_LE(std::abs(difference), 4 * error);
   EXPECT_LT(4 * error, 0.02 * reference);
-  params.samples                      = 16;
-  params.lobe_guide                   = 0.5f;
-  auto [guided_variance, guided_rays] = variance_between_seeds(scene, params, 8);
-  params.lobe_guide                   = 0;
-  auto [plain_variance, plain_rays]   = variance_between_seeds(scene, params, 8);
-  auto ratio = guided_variance * guided_rays / (plain_variance * plain_rays);
-  std::printf("[ figure ] lobe guide: variance %.3e against %.3e, rays %lld against %lld, "
-              "variance x rays %.2f\n",
-      guided_variance, plain_variance, (long long)guided_rays, (long long)plain_rays, ratio);
-  EXPECT_LT(ratio, 0.8);
+  params.samples    = 16;
+  params.lobe_guide = 0.5f;
+  auto unguided       = params;
+  unguided.lobe_guide = 0;
+  EXPECT_LT(variance_times_rays_ratio(scene, params, unguided, "lobe guide"), 0.8);
   // The share is checked: in [0, 0.95], so that every lobe keeps a chance.
   auto message = std::string{};
   for (auto share : {0.0f, 0.5f, 0.95f}) {
