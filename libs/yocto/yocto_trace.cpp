@@ -934,14 +934,17 @@ static bool solve_ridge_system(std::array<double, 16> a, std::array<double, 4>& 
 
 // a + b . d by least squares over points (1, d) with a ridge worth `ridge`
 // of them towards a = prior, b = 0, given X^T X and X^T y; the prior where
-// the system cannot be solved.
+// the system cannot be solved or its solution is not finite in float.
 static std::array<float, 4> fit_ridge_line(const std::array<double, 16>& normal,
     const std::array<double, 4>& targets, double ridge, double prior) {
   auto a = normal;
   for (auto i = 0; i < 4; i++) a[i * 4 + i] += ridge;
   auto line = targets;
   line[0] += ridge * prior;
-  if (!solve_ridge_system(a, line)) line = {prior, 0, 0, 0};
+  auto fit = std::array<float, 4>{(float)prior, 0, 0, 0};
+  if (!solve_ridge_system(a, line)) return fit;
+  for (auto i = 0; i < 4; i++)
+    if (!std::isfinite((float)line[i])) return fit;
   return {(float)line[0], (float)line[1], (float)line[2], (float)line[3]};
 }
 
