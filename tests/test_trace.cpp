@@ -693,9 +693,6 @@ TEST(trace, roulette_threshold_keeps_the_mean) {
       "threshold " + std::to_string(automatic.roulette_threshold) + " (automatic) against 1");
 }
 
-// The hair test scene's curtain before a black wall (in place of its
-// sphere): a tail that leaves the curtain towards the camera's side reaches
-// the sky, one that leaves towards the wall ends there.
 // Renders of seeds 1 ... n: the pixels' variance between them (averaged over
 // pixels and channels) and the rays all of them cast.
 static std::pair<double, int64_t> variance_between_seeds(
@@ -734,6 +731,9 @@ static double variance_times_rays_ratio(const scene_data& scene, const trace_par
   return ratio;
 }
 
+// The hair test scene's curtain before a black wall (in place of its
+// sphere): a tail that leaves the curtain towards the camera's side reaches
+// the sky, one that leaves towards the wall ends there.
 static scene_data make_walled_hair_scene() {
   auto scene = make_hair_test_scene();
   scene.shapes[1]    = make_quad_shape({20, 20});
