@@ -810,6 +810,61 @@ TEST(trace, roulette_cache_learns_where_tails_lead) {
   EXPECT_EQ(run_trace_pilot(scene, bvh, context, params).roulette_cache.cells.x, 0);
 }
 
+TEST(trace, roulette_cache_is_fitted_again_from_the_plans_paths) {
+  // The walled curtain at 32x32, 16 spp, adaptive sampling on: the render's
+  // cache is the pilot's fitted again with the tails of the plan's split
+  // paths as well (each path's own: see record_path_tails), the same bits
+  // with 1 and 2 threads, with as many cells or more, and it still sees
+  // that a tail towards the sky is worth more than twice one towards the
+  // wall (measured 0.32 against 0). Without the plan, or with the control
+  // variate, the render's cache is the pilot's.
+  auto scene = make_walled_hair_scene();
+  auto bvh   = scene_bvh{};
+  auto error = std::string{};
+  ASSERT_TRUE(make_scene_bvh(bvh, scene, {}, error)) << error;
+  auto params       = trace_params{};
+  params.resolution = 32;
+  params.samples    = 16;
+  params.adaptive   = trace_adaptive_type::on;
+  params.threads    = 1;
+  auto context      = make_trace_context(scene, params);
+  auto first        = run_trace_pilot(scene, bvh, context, params).roulette_cache;
+  auto cache_of_render = [&](const trace_params& params) {
+    auto state = trace_state{};
+    init_trace_state(state, scene, params);
+    trace_samples(state, scene, bvh, context, params, 1);
+    return state.roulette_cache;
+  };
+  auto cells = [](const trace_roulette_cache& cache) {
+    return cache.cells.x * cache.cells.y * cache.cells.z;
+  };
+  auto refit = cache_of_render(params);
+  params.threads = 2;
+  auto again     = cache_of_render(params);
+  EXPECT_EQ(again.cells, refit.cells);
+  EXPECT_EQ(again.tails, refit.tails);
+  ASSERT_GT(cells(first), 0);
+  EXPECT_GE(cells(refit), cells(first));
+  EXPECT_NE(refit.tails, first.tails);
+  EXPECT_EQ(refit.pixel_deviation, first.pixel_deviation);
+  auto centre = vec3f{0, 0, 0};
+  auto& tail  = refit.tails[find_roulette_cell(refit, centre)];
+  auto  to_sky = tail[0] + tail[3], to_wall = tail[0] - tail[3];
+  std::printf("[ figure ] refitted tail moment towards the sky %g, towards the wall %g\n",
+      to_sky, to_wall);
+  EXPECT_GT(to_sky, 2 * std::max(to_wall, 0.0f));
+  params.adaptive = trace_adaptive_type::off;
+  auto unplanned  = cache_of_render(params);
+  EXPECT_EQ(unplanned.cells, first.cells);
+  EXPECT_EQ(unplanned.tails, first.tails);
+  params.adaptive         = trace_adaptive_type::on;
+  params.roulette_control = true;
+  auto controlled         = cache_of_render(params);
+  auto controlled_pilot   = run_trace_pilot(scene, bvh, context, params).roulette_cache;
+  EXPECT_EQ(controlled.tails, controlled_pilot.tails);
+  EXPECT_EQ(controlled.controls, controlled_pilot.controls);
+}
+
 TEST(trace, roulette_control_keeps_the_mean_and_lowers_the_noise) {
   // The hair test scene with light brown hair (eumelanin 0.5: its tails
   // bring back much of what they carry, which the roulette loses when it

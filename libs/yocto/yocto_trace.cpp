@@ -368,6 +368,9 @@ struct trace_walk {
   const trace_allocation*            allocation      = nullptr;
   trace_tally*                       tally           = nullptr;
   const trace_roulette_cache*        roulette        = nullptr;
+  // With roulette_points: split paths (trace_path) turn their points into
+  // tails here, each path's as soon as it ends (see record_path_tails).
+  std::vector<trace_tail_record>*    tails           = nullptr;
 };
 
 // The cell of a grid (bounds, cells per axis, cells per unit length) that
@@ -431,6 +434,34 @@ float roulette_survival(const trace_roulette_cache& cache, const vec3f& position
   return roulette_survival(cache, find_roulette_cell(cache, position), direction, weight);
 }
 
+// A pilot path's tail at one of its roulette points, now that the path
+// has ended with `radiance` gathered and `rays` cast: as if no roulette had
+// been played at the point, its squared radiance per unit of throughput and
+// its rays, weighted by the inverse probability of having survived it (zero
+// if it did not); with `record`, the cache's record of it where finite.
+// False for a point that gives no tail.
+static bool measure_path_tail(const trace_roulette_point& point, const vec3f& radiance,
+    int64_t rays, double& moment, double& cost, std::vector<trace_tail_record>* record) {
+  if (!(point.weight > 0) || !(point.survive > 0)) return false;
+  auto tail = glm::dvec3(radiance - point.radiance) / (double)point.weight;
+  moment    = point.survive * glm::dot(tail, tail) / 3;
+  cost      = (double)(rays - point.rays) / point.survive;
+  if (record && std::isfinite(moment) && std::isfinite(cost) && isfinite(vec3f(tail)))
+    record->push_back({point.position, point.direction, (float)moment, (float)cost,
+        vec3f(tail), point.throughput / point.weight});
+  return true;
+}
+
+// The tails of the roulette points a split path met (from `first` on), for
+// the roulette cache; the points are then dropped.
+static void record_path_tails(std::vector<trace_roulette_point>& points, size_t first,
+    const vec3f& radiance, int64_t rays, std::vector<trace_tail_record>& tails) {
+  auto moment = 0.0, cost = 0.0;
+  for (auto i = first; i < points.size(); i++)
+    measure_path_tail(points[i], radiance, rays, moment, cost, &tails);
+  points.resize(first);
+}
+
 static scene_intersection cast_closest(const trace_walk& walk, const ray3f& ray) {
   walk.rays++;
   if (walk.record) walk.record->push_back({ray, false});
@@ -452,7 +483,7 @@ static scene_intersection cast_closest(const trace_walk& walk, const ray3f& ray)
 static void scatter_path(const trace_walk& walk, material_point point, ray3f ray, int bounce,
     vec3f weight, sequence_state& sequence, vec3f& radiance, vec3f* lobes = nullptr) {
   auto& [scene, bvh, context, params, threshold, rays, record, points, shadows, allocation,
-      tally, roulette] = walk;
+      tally, roulette, tails] = walk;
   auto use_mis = params.sampler == trace_sampler_type::path;
   // Next-event estimation, when there are lights to sample; MIS weighs the
   // BSDF samples that find lights with area, so only then is a BSDF pdf
@@ -683,8 +714,10 @@ static vec3f trace_path(const trace_walk& walk, const ray3f& camera_ray,
   for (auto k = 0; k < split; k++) {
     sequence.index = sample * (uint32_t)split + (uint32_t)k;
     auto before    = sum;
+    auto first     = walk.roulette_points ? walk.roulette_points->size() : 0;
     scatter_path(walk, point, camera_ray, 0, {1, 1, 1}, sequence, sum, lobes);
     if (continuations) continuations[k] = sum - before;
+    if (walk.tails) record_path_tails(*walk.roulette_points, first, sum, walk.rays, *walk.tails);
   }
   sequence.index = sample;
   if (aov) {
@@ -1067,8 +1100,14 @@ static trace_roulette_cache make_roulette_cache(
 // which direction, give the roulette cache (see make_roulette_cache); with
 // params.allocation, its shadow rays give the allocation's visibility (see
 // make_trace_allocation).
-trace_pilot run_trace_pilot(const scene_data& scene, const scene_bvh& bvh,
-    const trace_context& context, const trace_params& params) {
+// A pilot's tails kept for a second fit of the roulette cache (see
+// init_roulette_threshold): per grid row, and the scalars of the first fit.
+struct trace_pilot_tails {
+  std::vector<std::vector<trace_tail_record>> rows = {};
+  double pixel_deviation = 0, moment = 0, cost = 0;
+};
+static trace_pilot run_trace_pilot(const scene_data& scene, const scene_bvh& bvh,
+    const trace_context& context, const trace_params& params, trace_pilot_tails* kept) {
   auto size   = camera_resolution(scene.cameras[params.camera], params.resolution);
   // 1% of the render's samples (2 x 8 on up to 1/1600 of its pixel samples),
   // but no fewer than 64 pixels (more than 1% of a tiny render) and no more
@@ -1123,21 +1162,13 @@ trace_pilot run_trace_pilot(const scene_data& scene, const scene_bvh& bvh,
             sums[2] += (double)rays;
             sums[3] += 1;
             for (auto& point : points) {
-              // The tail as if no roulette had been played at this point:
-              // its squared radiance per unit of throughput and its rays,
-              // weighted by the inverse probability of having survived it
-              // (zero if it did not).
-              if (!(point.weight > 0) || !(point.survive > 0)) continue;
-              auto tail   = glm::dvec3(radiance - point.radiance) / (double)point.weight;
-              auto moment = point.survive * glm::dot(tail, tail) / 3;
-              auto cost   = (double)(rays - point.rays) / point.survive;
+              auto moment = 0.0, cost = 0.0;
+              if (!measure_path_tail(point, radiance, rays, moment, cost,
+                      params.roulette_cache ? &tails : nullptr))
+                continue;
               sums[4] += moment;
               sums[5] += cost;
               sums[6] += 1;
-              if (params.roulette_cache && std::isfinite(moment) && std::isfinite(cost) &&
-                  isfinite(vec3f(tail)))
-                tails.push_back({point.position, point.direction, (float)moment, (float)cost,
-                    vec3f(tail), point.throughput / point.weight});
             }
           }
           means[set] = set_sum / (double)pilot_samples;
@@ -1170,7 +1201,13 @@ trace_pilot run_trace_pilot(const scene_data& scene, const scene_bvh& bvh,
     pilot_result.roulette_cache = make_roulette_cache(
         row_tails, std::sqrt(pixel_variance / pixel_cost), tail_moment, tail_cost,
         params.roulette_control);
+  if (kept && pilot_result.roulette_cache.cells.x > 0)
+    *kept = {std::move(row_tails), std::sqrt(pixel_variance / pixel_cost), tail_moment, tail_cost};
   return pilot_result;
+}
+trace_pilot run_trace_pilot(const scene_data& scene, const scene_bvh& bvh,
+    const trace_context& context, const trace_params& params) {
+  return run_trace_pilot(scene, bvh, context, params, nullptr);
 }
 
 float estimate_roulette_threshold(const scene_data& scene, const scene_bvh& bvh,
@@ -1354,23 +1391,33 @@ static std::vector<float> allocate_stratified_rates(const std::vector<double>& h
 // the variance of a hit's mean, V_hit + V_tail / 2, and the tail's rays,
 // averaged over 7 x 7 pixels, the variances shrunk by their noise. Then per
 // pixel the split and the rates.
-trace_pixel_plan estimate_pixel_plan(const scene_data& scene, const scene_bvh& bvh,
+// With `tails` (a list per image row), the tails of the pilot's paths too.
+static trace_pixel_plan estimate_pixel_plan(const scene_data& scene, const scene_bvh& bvh,
     const trace_context& context, const trace_params& params, float roulette_threshold,
-    const trace_allocation* allocation, const trace_roulette_cache* roulette_cache) {
+    const trace_allocation* allocation, const trace_roulette_cache* roulette_cache,
+    std::vector<std::vector<trace_tail_record>>* tails) {
   auto  size   = camera_resolution(scene.cameras[params.camera], params.resolution);
   auto& camera = scene.cameras[params.camera];
   auto  pixels = (size_t)size.x * size.y;
   auto  tail_variance = std::vector<double>(pixels), hit_variance = std::vector<double>(pixels);
   auto  tail_cost     = std::vector<double>(pixels);
   auto  seed = hash_uint64(params.seed ^ 0x7261746573ULL);  // "rates"
+  // Tails are kept on no more than 32,768 of the measured pixels (all of
+  // them at 256 x 256; 1 in 32, picked by a hash, at 1920 x 1080): about
+  // 60 MB of records at most, for a cache fit that is no longer noisy.
+  auto tail_stride = (uint64_t)std::max(1.0, std::ceil((double)pixels / 2 / 32768));
   parallel_chunks(size.y, 1, params.threads, [&](int64_t begin, int64_t end) {
     auto rays = (int64_t)0;
-    auto walk = trace_walk{scene, bvh, context, params, roulette_threshold, rays, nullptr, nullptr,
-        nullptr, allocation, nullptr, roulette_cache};
+    auto points = std::vector<trace_roulette_point>{};
+    auto walk = trace_walk{scene, bvh, context, params, roulette_threshold, rays, nullptr,
+        nullptr, nullptr, allocation, nullptr, roulette_cache};
     for (auto j = (int)begin; j < (int)end; j++) {
       for (auto i = 0; i < size.x; i++) {
         if (!pilot_measures(i, j)) continue;
         auto pixel  = (int64_t)j * size.x + i;
+        auto record = tails && hash_uint64(seed ^ (uint64_t)pixel) % tail_stride == 0;
+        walk.roulette_points = record ? &points : nullptr;
+        walk.tails           = record ? &(*tails)[j] : nullptr;
         auto means  = std::array<vec3f, 2>{};
         auto within = 0.0, camera_rays = 0.0;
         rays = 0;
@@ -1452,6 +1499,12 @@ trace_pixel_plan estimate_pixel_plan(const scene_data& scene, const scene_bvh& b
   plan.rates = allocate_stratified_rates(
       hit_variance, variance, cost, budget, params.samples, params.threads);
   return plan;
+}
+trace_pixel_plan estimate_pixel_plan(const scene_data& scene, const scene_bvh& bvh,
+    const trace_context& context, const trace_params& params, float roulette_threshold,
+    const trace_allocation* allocation, const trace_roulette_cache* roulette_cache) {
+  return estimate_pixel_plan(
+      scene, bvh, context, params, roulette_threshold, allocation, roulette_cache, nullptr);
 }
 
 // A pixel's adaptive rate (trace_state::rates) as m paths every sample or
@@ -1586,9 +1639,10 @@ static void init_roulette_threshold(trace_state& state, const scene_data& scene,
     const scene_bvh& bvh, const trace_context& context, const trace_params& params) {
   if (state.roulette_threshold > 0) return;
   auto pilot  = trace_pilot{};
+  auto kept   = trace_pilot_tails{};
   auto lights = paths_sample_lights(params, context);
   if (params.roulette_threshold <= 0 || (params.allocation && lights))
-    pilot = run_trace_pilot(scene, bvh, context, params);
+    pilot = run_trace_pilot(scene, bvh, context, params, &kept);
   state.roulette_threshold = params.roulette_threshold > 0 ? params.roulette_threshold
                                                            : pilot.roulette_threshold;
   state.allocation = pilot.allocation;
@@ -1598,11 +1652,25 @@ static void init_roulette_threshold(trace_state& state, const scene_data& scene,
   auto roulette = state.roulette_cache.cells.x > 0 ? &state.roulette_cache : nullptr;
   state.split   = std::max(params.split, 1);
   if (params.adaptive == trace_adaptive_type::off) return;
-  auto plan = estimate_pixel_plan(
-      scene, bvh, context, params, state.roulette_threshold, allocation, roulette);
+  // The plan's paths are the cache's second training set: its fit is made
+  // again from both pilots' tails (about three times the first's, spread
+  // over every other pixel), which the render then uses. Not with the
+  // control variate: its credits and debits are not the tails the fit
+  // reads (a tail is zero where the roulette ended it).
+  auto refit = roulette && !kept.rows.empty() && !params.roulette_control;
+  auto plan_tails = std::vector<std::vector<trace_tail_record>>(
+      refit ? camera_resolution(scene.cameras[params.camera], params.resolution).y : 0);
+  auto plan = estimate_pixel_plan(scene, bvh, context, params, state.roulette_threshold,
+      allocation, roulette, refit ? &plan_tails : nullptr);
   state.rates         = std::move(plan.rates);
   state.splits        = std::move(plan.splits);
   state.adaptive_gain = plan.gain;
+  if (refit) {
+    for (auto& row : plan_tails) kept.rows.push_back(std::move(row));
+    auto cache = make_roulette_cache(
+        kept.rows, kept.pixel_deviation, kept.moment, kept.cost, params.roulette_control);
+    if (cache.cells.x > 0) state.roulette_cache = std::move(cache);
+  }
 }
 
 bool trace_samples(trace_state& state, const scene_data& scene, const scene_bvh& bvh,
