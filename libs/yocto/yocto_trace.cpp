@@ -1403,8 +1403,9 @@ static trace_pixel_plan estimate_pixel_plan(const scene_data& scene, const scene
   auto  tail_cost     = std::vector<double>(pixels);
   auto  seed = hash_uint64(params.seed ^ 0x7261746573ULL);  // "rates"
   // Tails are kept on no more than 32,768 of the measured pixels (all of
-  // them at 256 x 256; 1 in 32, picked by a hash, at 1920 x 1080): about
-  // 60 MB of records at most, for a cache fit that is no longer noisy.
+  // them at 256 x 256; 1 in 32, picked by a hash, at 1920 x 1080), so that
+  // their records stay small (on the peers' blond curly ball at 1920², 17 MB
+  // more peak memory than without them).
   auto tail_stride = (uint64_t)std::max(1.0, std::ceil((double)pixels / 2 / 32768));
   parallel_chunks(size.y, 1, params.threads, [&](int64_t begin, int64_t end) {
     auto rays = (int64_t)0;
@@ -1653,8 +1654,8 @@ static void init_roulette_threshold(trace_state& state, const scene_data& scene,
   state.split   = std::max(params.split, 1);
   if (params.adaptive == trace_adaptive_type::off) return;
   // The plan's paths are the cache's second training set: its fit is made
-  // again from both pilots' tails (about three times the first's, spread
-  // over every other pixel), which the render then uses. Not with the
+  // again from both pilots' tails (about three times the first's at 256²,
+  // spread over the image), which the render then uses. Not with the
   // control variate: its credits and debits are not the tails the fit
   // reads (a tail is zero where the roulette ended it).
   auto refit = roulette && !kept.rows.empty() && !params.roulette_control;
