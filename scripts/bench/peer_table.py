@@ -17,6 +17,9 @@ straight ball at 512², 64 spp (seed 3). compare.sh keeps references and the
 peers' runs in --work (outside the tree, so that later sessions reuse them):
 the table can be built up cell by cell; --cached-only scores only the cells
 whose references and peer runs are all there (rendering yocto-hair's runs).
+A cell not scored in this run keeps its row from the CSV already at --out,
+with the yscene that row was measured with (the yscene column), so a table
+built up over sessions says which binary each row is.
 The peers' timed runs are kept once made, so make them on an idle machine.
 Writes --out (markdown) and the same rows as CSV beside it.
 """
@@ -76,6 +79,30 @@ def cached(work, variant, eumelanin, sun, res, spp, seeds, ref_spp):
     return all(os.path.exists(name) for name in names)
 
 
+def previous_rows(out):
+    """The rows of the CSV beside --out, by cell: (yscene, reference spp, ours, (peer, its
+    figures)). A CSV without the yscene and ref_spp columns (older runs) takes the binary and
+    the references its markdown's header names."""
+    path = os.path.splitext(out)[0] + ".csv"
+    if not os.path.exists(path):
+        return {}
+    header_binary, header_refs = "?", "?"
+    if os.path.exists(out):
+        text = open(out, encoding="utf-8").read()
+        match = re.search(r"yscene sha256 ([0-9a-f]+)", text)
+        header_binary = match.group(1) if match else "?"
+        match = re.search(r"references 2 x (\d+) spp", text)
+        header_refs = match.group(1) if match else "?"
+    rows = {}
+    with open(path, newline="", encoding="utf-8") as f:
+        for row in csv.DictReader(f):
+            ours = (float(row["mse"]), float(row["cpu_s"]), float(row["efficiency"]))
+            peer = (float(row["peer_mse"]), float(row["peer_cpu_s"]), float(row["peer_efficiency"]))
+            rows[row["cell"]] = (row.get("yscene") or header_binary,
+                                 row.get("ref_spp") or header_refs, ours, (row["best_peer"], peer))
+    return rows
+
+
 ROW = re.compile(r"^(\S+)\s+(\d+)\s+(\S+)\s+(\S+)\s+(\S+)\s+(\S+)$")
 
 
@@ -117,48 +144,53 @@ def main():
         args.ref_yscene = os.path.abspath(args.ref_yscene)
     os.makedirs(args.work, exist_ok=True)
     binary = binary_id(args.yscene)
+    previous = previous_rows(args.out)
     table = []
     for name, variant, eumelanin, sun, res, spp, seeds in cells():
         if args.cells and not any(part in name for part in args.cells):
+            table.append((name, previous.get(name)))
             continue
         if args.cached_only and not cached(args.work, variant, eumelanin, sun, res, spp, seeds,
                                            args.ref_spp):
-            table.append((name, None))
+            table.append((name, previous.get(name)))
             continue
         rows = run_cell(args, variant, eumelanin, sun, res, spp, seeds)
         ours = rows["yocto-hair"]
         peer = max((row for row in rows.items() if row[0] != "yocto-hair"), key=lambda r: r[1][2])
-        table.append((name, (ours, peer)))
+        table.append((name, (binary, str(args.ref_spp), ours, peer)))
         print(f"{name}: {ours[2] / peer[1][2]:.2f}x {peer[0]}", file=sys.stderr, flush=True)
     lines = [
         "# yocto-hair against Mitsuba 3 and Cycles 5, side by side",
         "",
-        f"`python3 scripts/bench/peer_table.py` ({datetime.date.today()}, yscene sha256 {binary}; "
-        f"references 2 x {args.ref_spp} spp each; seeds 3 4 5, 512² seed 3; 2 threads). Each cell is "
+        f"`python3 scripts/bench/peer_table.py` (last run {datetime.date.today()} with yscene sha256 "
+        f"{binary} and references of 2 x {args.ref_spp} spp each; seeds 3 4 5, 512² seed 3; 2 threads). "
+        "Each cell is "
         "one run of `../shared/peers/mitsuba/compare.sh --cycles5`: MSE against the renderer's own "
         "reference less the reference's noise, render CPU-s the median of the runs, efficiency "
         "1 / (MSE x CPU-s); the best peer is the best of Mitsuba 3's `independent`, `multijitter` and "
         "`orthogonal` samplers and Cycles 5's `TABULATED_SOBOL`, `BLUE_NOISE` and `AUTOMATIC` patterns "
         "on that cell. Sun: a distant light from (1,-1,2), irradiance 3, beside the white sky; low "
-        "sun: from (1,-1,0.35). A cell marked 'not run' had no kept peer runs (`--cached-only`).",
+        "sun: from (1,-1,0.35). The yscene column is the sha256 of the binary a row was measured "
+        "with and refs the spp of each half of its references (rows kept from earlier runs keep "
+        "theirs); a cell marked 'not run' has no row yet.",
         "",
-        "| cell | yocto-hair MSE | CPU-s | efficiency | best peer | its MSE, CPU-s, efficiency | x best peer |",
-        "|---|---:|---:|---:|---|---:|---:|",
+        "| cell | yscene | refs | yocto-hair MSE | CPU-s | efficiency | best peer | its MSE, CPU-s, efficiency | x best peer |",
+        "|---|---|---:|---:|---:|---:|---|---:|---:|",
     ]
     records = []
     for name, result in table:
         if result is None:
-            lines.append(f"| {name} | not run | | | | | |")
+            lines.append(f"| {name} | not run | | | | | | | |")
             continue
-        (mse, cpu, efficiency), (peer, (pmse, pcpu, peff)) = result
-        lines.append(f"| {name} | {mse:.4g} | {cpu:.2f} | {efficiency:.0f} | {peer} | "
+        yscene, refs, (mse, cpu, efficiency), (peer, (pmse, pcpu, peff)) = result
+        lines.append(f"| {name} | {yscene} | {refs} | {mse:.4g} | {cpu:.2f} | {efficiency:.0f} | {peer} | "
                      f"{pmse:.4g}, {pcpu:.2f}, {peff:.0f} | **{efficiency / peff:.2f}** |")
-        records.append([name, mse, cpu, efficiency, peer, pmse, pcpu, peff, efficiency / peff])
+        records.append([name, yscene, refs, mse, cpu, efficiency, peer, pmse, pcpu, peff, efficiency / peff])
     os.makedirs(os.path.dirname(args.out), exist_ok=True)
     for path, write in [(args.out, lambda f: f.write("\n".join(lines) + "\n")),
                         (os.path.splitext(args.out)[0] + ".csv",
                          lambda f: csv.writer(f).writerows(
-                             [["cell", "mse", "cpu_s", "efficiency", "best_peer", "peer_mse",
+                             [["cell", "yscene", "ref_spp", "mse", "cpu_s", "efficiency", "best_peer", "peer_mse",
                                "peer_cpu_s", "peer_efficiency", "ratio"]] + records))]:
         with open(path + ".tmp", "w", newline="") as f:
             write(f)
