@@ -147,11 +147,10 @@ def main():
     previous = previous_rows(args.out)
     table = []
     for name, variant, eumelanin, sun, res, spp, seeds in cells():
-        if args.cells and not any(part in name for part in args.cells):
-            table.append((name, previous.get(name)))
-            continue
-        if args.cached_only and not cached(args.work, variant, eumelanin, sun, res, spp, seeds,
-                                           args.ref_spp):
+        # A cell left out by --cells or not kept for --cached-only keeps its earlier row.
+        if (args.cells and not any(part in name for part in args.cells)) or (
+                args.cached_only and not cached(args.work, variant, eumelanin, sun, res, spp,
+                                                seeds, args.ref_spp)):
             table.append((name, previous.get(name)))
             continue
         rows = run_cell(args, variant, eumelanin, sun, res, spp, seeds)
@@ -185,13 +184,15 @@ def main():
         yscene, refs, (mse, cpu, efficiency), (peer, (pmse, pcpu, peff)) = result
         lines.append(f"| {name} | {yscene} | {refs} | {mse:.4g} | {cpu:.2f} | {efficiency:.0f} | {peer} | "
                      f"{pmse:.4g}, {pcpu:.2f}, {peff:.0f} | **{efficiency / peff:.2f}** |")
-        records.append([name, yscene, refs, mse, cpu, efficiency, peer, pmse, pcpu, peff, efficiency / peff])
+        records.append([name, yscene, refs, mse, cpu, efficiency, peer, pmse, pcpu, peff,
+                        efficiency / peff])
     os.makedirs(os.path.dirname(args.out), exist_ok=True)
     for path, write in [(args.out, lambda f: f.write("\n".join(lines) + "\n")),
                         (os.path.splitext(args.out)[0] + ".csv",
                          lambda f: csv.writer(f).writerows(
-                             [["cell", "yscene", "ref_spp", "mse", "cpu_s", "efficiency", "best_peer", "peer_mse",
-                               "peer_cpu_s", "peer_efficiency", "ratio"]] + records))]:
+                             [["cell", "yscene", "ref_spp", "mse", "cpu_s", "efficiency",
+                               "best_peer", "peer_mse", "peer_cpu_s", "peer_efficiency",
+                               "ratio"]] + records))]:
         with open(path + ".tmp", "w", newline="") as f:
             write(f)
         os.replace(path + ".tmp", path)
