@@ -186,6 +186,14 @@ def main():
                      f"{pmse:.4g}, {pcpu:.2f}, {peff:.0f} | **{efficiency / peff:.2f}** |")
         records.append([name, yscene, refs, mse, cpu, efficiency, peer, pmse, pcpu, peff,
                         efficiency / peff])
+    # What follows a '## Notes' heading in the existing table is written by
+    # hand (how the rows were measured, over which sessions): kept as it is.
+    if os.path.exists(args.out):
+        with open(args.out) as f:
+            previous = f.read()
+        notes = previous.find("\n## Notes\n")
+        if notes >= 0:
+            lines += [""] + previous[notes + 1:].rstrip("\n").split("\n")
     os.makedirs(os.path.dirname(args.out), exist_ok=True)
     for path, write in [(args.out, lambda f: f.write("\n".join(lines) + "\n")),
                         (os.path.splitext(args.out)[0] + ".csv",
