@@ -79,20 +79,17 @@ def cached(work, variant, eumelanin, sun, res, spp, seeds, ref_spp):
     return all(os.path.exists(name) for name in names)
 
 
-def previous_rows(out):
+def previous_rows(out, markdown):
     """The rows of the CSV beside --out, by cell: (yscene, reference spp, ours, (peer, its
     figures)). A CSV without the yscene and ref_spp columns (older runs) takes the binary and
-    the references its markdown's header names."""
+    the references its markdown's header (the text of --out, `markdown`) names."""
     path = os.path.splitext(out)[0] + ".csv"
     if not os.path.exists(path):
         return {}
-    header_binary, header_refs = "?", "?"
-    if os.path.exists(out):
-        text = open(out, encoding="utf-8").read()
-        match = re.search(r"yscene sha256 ([0-9a-f]+)", text)
-        header_binary = match.group(1) if match else "?"
-        match = re.search(r"references 2 x (\d+) spp", text)
-        header_refs = match.group(1) if match else "?"
+    match = re.search(r"yscene sha256 ([0-9a-f]+)", markdown)
+    header_binary = match.group(1) if match else "?"
+    match = re.search(r"references 2 x (\d+) spp", markdown)
+    header_refs = match.group(1) if match else "?"
     rows = {}
     with open(path, newline="", encoding="utf-8") as f:
         for row in csv.DictReader(f):
@@ -144,7 +141,11 @@ def main():
         args.ref_yscene = os.path.abspath(args.ref_yscene)
     os.makedirs(args.work, exist_ok=True)
     binary = binary_id(args.yscene)
-    previous = previous_rows(args.out)
+    markdown = ""
+    if os.path.exists(args.out):
+        with open(args.out, encoding="utf-8") as f:
+            markdown = f.read()
+    previous = previous_rows(args.out, markdown)
     table = []
     for name, variant, eumelanin, sun, res, spp, seeds in cells():
         # A cell left out by --cells or not kept for --cached-only keeps its earlier row.
@@ -188,12 +189,9 @@ def main():
                         efficiency / peff])
     # What follows a '## Notes' heading in the existing table is written by
     # hand (how the rows were measured, over which sessions): kept as it is.
-    if os.path.exists(args.out):
-        with open(args.out) as f:
-            previous = f.read()
-        notes = previous.find("\n## Notes\n")
-        if notes >= 0:
-            lines += [""] + previous[notes + 1:].rstrip("\n").split("\n")
+    notes = markdown.find("\n## Notes\n")
+    if notes >= 0:
+        lines += [""] + markdown[notes + 1:].rstrip("\n").split("\n")
     os.makedirs(os.path.dirname(args.out), exist_ok=True)
     for path, write in [(args.out, lambda f: f.write("\n".join(lines) + "\n")),
                         (os.path.splitext(args.out)[0] + ".csv",
